@@ -1,0 +1,18 @@
+"""Variational partitioned Runge–Kutta integrators with the projections of
+"Projected Variational Integrators for Degenerate Lagrangian Systems".
+
+Public API::
+
+    import integrators
+    sys = integrators.system("point_vortices", gamma=(0.1, 0.1))
+    tab = integrators.tableau("GLRK2")
+    sol = integrators.integrate(sys, q0, tableau=tab, projection="symmetric", h=0.1, steps=1000)
+"""
+from .integrate import Solution, integrate
+from .projections import PROJECTIONS, Stepper
+from .systems import SYSTEM_NAMES, System, system, system_from
+from .tableaus import TABLEAU_NAMES, Tableau, tableau, tableau_from_arrays, tableau_from_file
+
+__all__ = ["integrate", "Solution", "system", "system_from", "System", "SYSTEM_NAMES", "tableau",
+           "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Stepper"]
+__version__ = "0.1.0"

@@ -1,0 +1,255 @@
+"""One step of a (projected) VPRK method, batched over points (sec:projection).
+
+With φ(q, p) = p − ϑ(q) the projection term h Ω⁻¹∇φᵀλ of eq:projector moves a
+point by (q, p) ↦ (q + hλ, p + h ϑ_q(x)ᵀλ), where x is where ϑ_q is evaluated.
+We write Λ = hλ.  The five choices differ only where the paper says they do
+(table in sec:projection, σ = R(∞) of the tableau):
+
+=============  ============================  ====================================  ==================
+projection     perturbation (before Ψ_h)     projection (after Ψ_h)                solved
+=============  ============================  ====================================  ==================
+none           —                             —                                     Ψ_h alone
+standard       —                             + Λ_{n+1}, ϑ_q at q_{n+1}             Ψ_h, then Λ
+               (eq:orthogonal_projection)
+symmetric      + Λ, ϑ_q at q_n               + σΛ, ϑ_q at q_{n+1}                  Ψ_h and Λ together
+               (eq:symmetric_symplectic_projection)
+symplectic     + Λ_n (known), ϑ_q at q_n      + σΛ_{n+1}, ϑ_q at q_{n+1}            Ψ_h, then Λ_{n+1}
+               (eq:symplectic_projection)
+midpoint       + Λ, ϑ_q at q̄_{n+1/2}          + σΛ, ϑ_q at q̄_{n+1/2}                Ψ_h and Λ together
+               (eq:symplectic_midpoint_projection)
+=============  ============================  ====================================  ==================
+
+q̄_{n+1/2} = (q̄_n + q̄_{n+1})/2 is the midpoint of the unprojected step.  For the
+midpoint projection the paper's eq:symplectic_midpoint_projection_post prints no
+σ while its table has R(∞)λ_{n+1/2}; we follow the table (as GeometricIntegrators.jl
+does): with σ = +1 and R(∞) = −1 (GLRK1, SRK3) the constraint cannot be enforced
+at leading order.  Projected methods start every step on the constraint,
+p_n = ϑ(q_n) (eq:fibre_derivative); ``none`` carries its own p_n.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import vprk
+from .newton import EPS, newton
+
+PROJECTIONS = ("none", "standard", "symmetric", "symplectic", "midpoint")
+
+
+class StepResult:
+    """Outcome of one step for n points (all arrays have a leading points axis)."""
+
+    __slots__ = ("q", "p", "Lam", "Y", "mu", "ok", "iterations", "inc_q", "inc_p")
+
+
+class Stepper:
+    """The step map Φ_h of one (tableau, projection) pair for a system.
+
+    ``step(q, p, Lam, guess)`` advances n points; see :meth:`step`.
+    """
+
+    def __init__(self, system, tableau, projection, h):
+        if projection not in PROJECTIONS:
+            raise ValueError(f"unknown projection '{projection}'; choose one of {', '.join(PROJECTIONS)}")
+        if projection in ("symmetric", "symplectic", "midpoint") and tableau.R_inf in (0.0, float("inf")):
+            raise ValueError(f"projection '{projection}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = "
+                             f"{tableau.R_inf:g}; use 'none' or 'standard'")
+        self.system, self.tableau, self.projection, self.h = system, tableau, projection, float(h)
+        self.sigma = 1.0 if projection == "standard" else float(np.sign(tableau.R_inf))
+        self.coupled = projection in ("symmetric", "midpoint")
+        self.lobatto = tableau.d is not None
+        s, d = tableau.s, system.d
+        self.s, self.d = s, d
+        self.nz = (s + (1 if self.coupled else 0) + (1 if self.lobatto else 0)) * d
+        c = tableau.c
+        # Lagrange extrapolation of last step's stage values to the next step's nodes
+        E = np.ones((s, s))
+        for i in range(s):
+            for j in range(s):
+                for k in range(s):
+                    if k != j:
+                        E[i, j] *= (1.0 + c[i] - c[k]) / (c[j] - c[k])
+        self.extrapolation = E
+
+    # -- initial guesses --------------------------------------------------------
+    def first_guess(self, q):
+        """Stage displacements h·q̇(q_n) at every stage: (n, s, d)."""
+        with np.errstate(all="ignore"):
+            try:
+                v = self.system.vector_field(q)
+            except np.linalg.LinAlgError:
+                v = np.zeros_like(q)
+        v = np.where(np.isfinite(v), v, 0.0)
+        return np.repeat((self.h * v)[:, None, :], self.s, axis=1)
+
+    def extrapolate(self, Y):
+        """Next step's stage guess from this step's stages: (n, s, d)."""
+        E = self.extrapolation
+        out = np.empty_like(Y)
+        for i in range(self.s):
+            acc = E[i, 0] * Y[:, 0]
+            for j in range(1, self.s):
+                acc = acc + E[i, j] * Y[:, j]
+            out[:, i] = acc
+        return out
+
+    # -- the step -------------------------------------------------------------
+    def step(self, q, p, Lam, Y0, mu0):
+        """Advance n points by one step.
+
+        Parameters
+        ----------
+        q, p : (n, d) current state (p is ignored by projected methods: p_n = ϑ(q_n))
+        Lam : (n, d) last Λ = hλ (guess for standard/symmetric/midpoint; Λ_n for symplectic)
+        Y0 : (n, s, d) guess of the stage displacements
+        mu0 : (n, d) guess of the Lobatto multiplier
+
+        Returns
+        -------
+        StepResult with increments ``inc_q`` (to be added to q with compensated
+        summation), ``p`` (p_{n+1} as the method computes it), ``Lam`` (Λ of this
+        step), ``Y``/``mu`` (for the next guess), ``ok`` (n,) and ``iterations`` (n,).
+        """
+        sysm, tab, h, sig = self.system, self.tableau, self.h, self.sigma
+        s, d = self.s, self.d
+        proj = self.projection
+        n = q.shape[0]
+        if proj == "none":
+            qbar, pbar = q, p
+        elif proj == "symplectic":
+            qbar = q + Lam
+            pbar = sysm.theta(q) + vprk.transpose_apply(sysm.dtheta(q), Lam)
+        else:
+            qbar, pbar = q, sysm.theta(q)
+        Theta_q = sysm.dtheta(q) if proj == "symmetric" else None
+
+        sd = s * d
+        iL = sd if self.coupled else None
+        iM = sd + (d if self.coupled else 0) if self.lobatto else None
+
+        def unpack(z):
+            m = z.shape[0]
+            Y = z[:, :sd].reshape(m, s, d)
+            L = z[:, iL:iL + d] if self.coupled else None
+            mu = z[:, iM:iM + d] if self.lobatto else None
+            return Y, L, mu
+
+        def fun(idx, z):
+            Y, L, mu = unpack(z)
+            m = z.shape[0]
+            q0, pb = qbar[idx], pbar[idx]
+            Sx = None
+            if self.coupled:
+                q0 = q0 + L
+                sumbY = vprk.weigh(tab.b, tab.b_lo, Y)
+                if proj == "symmetric":
+                    Tx = Theta_q[idx]
+                else:  # midpoint: ϑ_q at the unprojected midpoint
+                    M = q0 + 0.5 * sumbY
+                    Tx = sysm.dtheta(M)
+                    Sx = vprk.contract_first(sysm.ddtheta(M), L)
+                pb = pb + vprk.transpose_apply(Tx, L)
+            st = vprk.Stages(sysm, tab, h, q0, Y)
+            R = vprk.stage_residual(tab, st, pb, mu)
+            J = np.zeros((m, self.nz, self.nz))
+            blocks = vprk.stage_jacobian_blocks(tab, st)
+            for i in range(s):
+                for j in range(s):
+                    B = blocks[i][j]
+                    if Sx is not None:
+                        B = B - (0.5 * tab.b[j]) * Sx
+                    J[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = B
+            res = [R.reshape(m, sd)]
+            if self.coupled:
+                TxT = np.swapaxes(Tx, -1, -2)
+                dpb_dL = TxT if Sx is None else TxT + Sx
+                shift = vprk.stage_jacobian_shift(tab, st)
+                for i in range(s):
+                    J[:, i * d:(i + 1) * d, iL:iL + d] = shift[i] - dpb_dL
+                q1 = q0 + sumbY + sig * L
+                sumbG = vprk.weigh(tab.b, tab.b_lo, st.G)
+                T1 = sysm.dtheta(q1)
+                if proj == "symmetric":
+                    S1 = vprk.contract_first(sysm.ddtheta(q1), L)
+                    p1 = pb + sumbG + sig * vprk.transpose_apply(T1, L)
+                    dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (1.0 + sig) * S1
+                    extra_Y = sig * S1
+                else:
+                    p1 = pb + sumbG + sig * vprk.transpose_apply(Tx, L)
+                    dp1_dL = (1.0 + sig) * dpb_dL
+                    extra_Y = (0.5 * (1.0 + sig)) * Sx
+                ThetaT = np.swapaxes(st.Theta, -1, -2)
+                KS = vprk.weigh(tab.b, np.zeros_like(tab.b), st.K)
+                rows = slice(iL, iL + d)
+                for j in range(s):
+                    KB = tab.b[0] * tab.a[0, j] * st.K[:, 0]
+                    for l in range(1, s):
+                        KB = KB + tab.b[l] * tab.a[l, j] * st.K[:, l]
+                    dp1 = KB + tab.b[j] * ThetaT[:, j] + tab.b[j] * extra_Y
+                    J[:, rows, j * d:(j + 1) * d] = dp1 - tab.b[j] * T1
+                J[:, rows, iL:iL + d] = dp1_dL + KS - (1.0 + sig) * T1
+                res.append(p1 - sysm.theta(q1))
+            if self.lobatto:
+                for i in range(s):
+                    J[:, i * d:(i + 1) * d, iM:iM + d] = (tab.d[i] / tab.b[i]) * np.eye(d)
+                    J[:, iM:iM + d, i * d:(i + 1) * d] = tab.d[i] * np.eye(d)
+                res.append(vprk.weigh(tab.d, np.zeros_like(tab.d), Y))
+            return np.concatenate(res, axis=1), J
+
+        z0 = np.empty((n, self.nz))
+        z0[:, :sd] = Y0.reshape(n, sd)
+        if self.coupled:
+            z0[:, iL:iL + d] = Lam
+        if self.lobatto:
+            z0[:, iM:iM + d] = mu0
+        qscale = np.maximum(np.max(np.abs(q), axis=1), 1.0)
+        pscale = np.maximum(np.max(np.abs(pbar), axis=1), 1.0)
+        scale = np.repeat(qscale[:, None], self.nz, axis=1)
+        if self.lobatto:
+            scale[:, iM:iM + d] = pscale[:, None]
+        z, ok, its = newton(fun, z0, scale)
+        Y, L, mu = unpack(z)
+
+        # unprojected end point of this step (eq:vprk_3), evaluated once more at the solution
+        q0 = qbar + L if self.coupled else qbar
+        st = vprk.Stages(sysm, tab, h, q0, Y, jacobian=False)
+        sumbY = vprk.weigh(tab.b, tab.b_lo, Y)
+        sumbG = vprk.weigh(tab.b, tab.b_lo, st.G)
+        out = StepResult()
+        out.Y, out.mu, out.iterations = Y, mu, its
+        if proj == "none":
+            out.inc_q, out.inc_p, out.p, out.Lam = sumbY, sumbG, None, np.zeros_like(q)
+        elif self.coupled:
+            pb = pbar + vprk.transpose_apply(Theta_q if proj == "symmetric" else sysm.dtheta(q0 + 0.5 * sumbY), L)
+            q1 = q0 + sumbY + sig * L
+            Tx = sysm.dtheta(q1) if proj == "symmetric" else sysm.dtheta(q0 + 0.5 * sumbY)
+            out.p = pb + sumbG + sig * vprk.transpose_apply(Tx, L)
+            out.inc_q = (L + sumbY) + sig * L
+            out.inc_p, out.Lam = None, L
+        else:  # standard / symplectic: the projection is a separate solve
+            qb, pb = qbar + sumbY, pbar + sumbG
+            L1, ok1, its1 = self._post_projection(qb, pb, Lam)
+            ok &= ok1
+            out.iterations = its + its1
+            T1 = sysm.dtheta(qb + sig * L1)
+            out.p = pb + sig * vprk.transpose_apply(T1, L1)
+            out.inc_q = (sumbY + sig * L1) if proj == "standard" else ((Lam + sumbY) + sig * L1)
+            out.inc_p, out.Lam = None, L1
+        out.ok = ok
+        return out
+
+    def _post_projection(self, qb, pb, guess):
+        """Solve ϑ(q̄ + σΛ) = p̄ + σ ϑ_q(q̄ + σΛ)ᵀΛ for Λ (eq:orthogonal_projection, eq:symplectic_projection_post)."""
+        sysm, sig = self.system, self.sigma
+
+        def fun(idx, L):
+            q1 = qb[idx] + sig * L
+            T1 = sysm.dtheta(q1)
+            S1 = vprk.contract_first(sysm.ddtheta(q1), L)
+            r = pb[idx] + sig * vprk.transpose_apply(T1, L) - sysm.theta(q1)
+            J = sig * (np.swapaxes(T1, -1, -2) - T1) + sig * sig * S1
+            return r, J
+
+        scale = np.repeat(np.maximum(np.max(np.abs(qb), axis=1), 1.0)[:, None], self.d, axis=1)
+        scale = np.where(np.isfinite(scale), scale, 1.0)
+        return newton(fun, guess, scale)

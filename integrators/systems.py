@@ -1,0 +1,324 @@
+"""Degenerate Lagrangian systems L(q, v) = ϑ(q)·v − H(q), defined by ϑ and H alone.
+
+A :class:`System` holds symbolic ϑ and H (sympy) and generates every derivative
+exactly: ϑ_{k,i} = ∂ϑ_k/∂q^i, ϑ_{k,ij}, ∇H, ∇²H, the noncanonical symplectic
+matrix Ω̄_ij = ∂_i ϑ_j − ∂_j ϑ_i (eq:euler_lagrange_equations_matrix), the explicit
+vector field q̇ = Ω̄⁻¹ ∇H and, given a symmetry vector field V(q), the Noether
+momentum P = ϑ·V (eq:noether_theorem).
+
+Every numerical function takes q of shape (..., d) and returns arrays with the
+same leading shape: ``theta`` (..., d), ``dtheta`` (..., d, d) indexed [k, i],
+``ddtheta`` (..., d, d, d) indexed [k, i, j], ``H`` (...), ``dH`` (..., d),
+``ddH`` (..., d, d).  The code is generated once per system (sympy common
+subexpression elimination, numpy printer) and compiled lazily, so a scene that
+never needs ϑ_{k,ij} never builds it.
+"""
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+
+import numpy as np
+import sympy
+from sympy.printing.numpy import NumPyPrinter
+
+
+class _Printer(NumPyPrinter):
+    """numpy printer that keeps parameters as names bound at compile time."""
+
+    def _print_Symbol(self, expr):
+        return expr.name
+
+
+def _compile(exprs, shape, qsyms, params, name):
+    """Compile sympy expressions into ``f(q) -> array of shape q.shape[:-1] + shape``."""
+    flat = list(exprs)
+    subs, reduced = sympy.cse(flat, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
+    printer = _Printer({"fully_qualified_modules": False, "allow_unknown_functions": False})
+    lines = [f"def {name}(q):"]
+    lines.append("    q = np.asarray(q, dtype=np.result_type(q, np.float64))")
+    lines.append(f"    out = np.zeros(q.shape[:-1] + {tuple(shape)!r}, dtype=q.dtype)")
+    for i, s in enumerate(qsyms):
+        lines.append(f"    {s.name} = q[..., {i}]")
+    for sym, e in subs:
+        lines.append(f"    {sym.name} = {printer.doprint(e)}")
+    for idx, e in zip(itertools.product(*[range(n) for n in shape]), reduced):
+        if e == 0:
+            continue
+        key = ", ".join(["..."] + [str(i) for i in idx])
+        lines.append(f"    out[{key}] = {printer.doprint(e)}")
+    lines.append("    return out")
+    src = "\n".join(lines)
+    namespace = {"np": np, "numpy": np, **{k.name: float(v) for k, v in params.items()}}
+    for fn in ("sqrt", "log", "exp", "sin", "cos", "tan", "arctan2", "arctan", "sinh", "cosh", "tanh",
+               "arcsin", "arccos", "abs", "pi", "e", "sign", "power"):
+        namespace[fn] = getattr(np, fn)
+    namespace["absolute"] = np.absolute
+    exec(compile(src, f"<generated {name}>", "exec"), namespace)
+    fn = namespace[name]
+    fn.source = src
+    return fn
+
+
+class System:
+    """A degenerate Lagrangian system from ϑ and H.
+
+    Parameters
+    ----------
+    name : str
+    q : list of d sympy Symbols (d even)
+    theta : list of d sympy expressions ϑ_i(q)
+    H : sympy expression H(q)
+    params : dict {Symbol: float}, parameter values (every parameter overridable)
+    symmetry : list of d expressions V(q) or None; momentum P = ϑ·V
+    domain : list of expressions g(q) that must be > 0 (e.g. [q1, q2])
+    defaults : dict with the paper's defaults (``q0``, ``h``, ...)
+    """
+
+    def __init__(self, name, q, theta, H, params=None, symmetry=None, domain=(), defaults=None,
+                 momentum_name=None):
+        self.name = name
+        self.q = tuple(q)
+        self.d = len(self.q)
+        if len(theta) != self.d:
+            raise ValueError(f"system {name}: ϑ has {len(theta)} components for {self.d} coordinates")
+        self.theta_expr = tuple(sympy.sympify(t) for t in theta)
+        self.H_expr = sympy.sympify(H)
+        self.params = dict(params or {})
+        free = set().union(*(t.free_symbols for t in self.theta_expr), self.H_expr.free_symbols)
+        unknown = free - set(self.q) - set(self.params)
+        if unknown:
+            raise ValueError(f"system {name}: no value for parameter(s) {', '.join(sorted(map(str, unknown)))}")
+        for k, v in self.params.items():
+            if not math.isfinite(float(v)):
+                raise ValueError(f"system {name}: parameter {k} = {v} is not finite")
+        self.symmetry = None if symmetry is None else tuple(sympy.sympify(v) for v in symmetry)
+        self.momentum_expr = (None if self.symmetry is None
+                              else sympy.expand(sum(t * v for t, v in zip(self.theta_expr, self.symmetry))))
+        self.momentum_name = momentum_name or ("P" if self.symmetry is not None else None)
+        self.domain_expr = tuple(sympy.sympify(g) for g in domain)
+        self.defaults = dict(defaults or {})
+
+    # -- symbolic derivatives -------------------------------------------------
+    @functools.cached_property
+    def dtheta_expr(self):
+        return [[sympy.diff(t, x) for x in self.q] for t in self.theta_expr]
+
+    @functools.cached_property
+    def ddtheta_expr(self):
+        return [[[sympy.diff(e, x) for x in self.q] for e in row] for row in self.dtheta_expr]
+
+    @functools.cached_property
+    def dH_expr(self):
+        return [sympy.diff(self.H_expr, x) for x in self.q]
+
+    @functools.cached_property
+    def ddH_expr(self):
+        return [[sympy.diff(e, x) for x in self.q] for e in self.dH_expr]
+
+    def _fn(self, name, exprs, shape):
+        return _compile(exprs, shape, self.q, self.params, name)
+
+    # -- compiled functions ---------------------------------------------------
+    @functools.cached_property
+    def theta(self):
+        """ϑ(q): (..., d)."""
+        return self._fn("theta", self.theta_expr, (self.d,))
+
+    @functools.cached_property
+    def dtheta(self):
+        """ϑ_{k,i}(q) = ∂ϑ_k/∂q^i: (..., d, d)."""
+        return self._fn("dtheta", [e for row in self.dtheta_expr for e in row], (self.d, self.d))
+
+    @functools.cached_property
+    def ddtheta(self):
+        """ϑ_{k,ij}(q): (..., d, d, d)."""
+        return self._fn("ddtheta", [e for m in self.ddtheta_expr for row in m for e in row],
+                        (self.d, self.d, self.d))
+
+    @functools.cached_property
+    def H(self):
+        """H(q): (...)."""
+        return self._fn("hamiltonian", [self.H_expr], ())
+
+    @functools.cached_property
+    def dH(self):
+        """∇H(q): (..., d)."""
+        return self._fn("dH", self.dH_expr, (self.d,))
+
+    @functools.cached_property
+    def ddH(self):
+        """∇²H(q): (..., d, d)."""
+        return self._fn("ddH", [e for row in self.ddH_expr for e in row], (self.d, self.d))
+
+    @property
+    def has_momentum(self) -> bool:
+        return self.momentum_expr is not None
+
+    @functools.cached_property
+    def momentum(self):
+        """Noether momentum P(q) = ϑ(q)·V(q): (...); None when no symmetry is given."""
+        if self.momentum_expr is None:
+            return None
+        return self._fn("momentum", [self.momentum_expr], ())
+
+    def Omega(self, q):
+        """Ω̄_ij = ∂_i ϑ_j − ∂_j ϑ_i (eq:euler_lagrange_equations_matrix): (..., d, d)."""
+        T = self.dtheta(q)
+        return np.swapaxes(T, -1, -2) - T
+
+    def vector_field(self, q):
+        """q̇ solving Ω̄(q) q̇ = ∇H(q): (..., d).
+
+        This is eq:euler_lagrange_equations written out, Σ_j (∂_iϑ_j − ∂_jϑ_i) q̇^j = ∂_iH.
+        The paper prints Ω̄ᵀ q̇ = ∇H in eq:euler_lagrange_equations_matrix with the same
+        definition of Ω̄; that transpose flips the direction of time (for the guiding
+        centre it would give ż = −u instead of b·ẋ = u), so we follow the Euler–Lagrange
+        equations.  See docs/conventions.md.
+        """
+        q = np.asarray(q, dtype=float)
+        return np.linalg.solve(self.Omega(q), self.dH(q)[..., None])[..., 0]
+
+    def in_domain(self, q):
+        """Boolean mask (...): finite and every domain expression > 0."""
+        q = np.asarray(q, dtype=float)
+        ok = np.all(np.isfinite(q), axis=-1)
+        if self.domain_expr:
+            g = self._domain_fn(q)
+            ok &= np.all(g > 0, axis=-1)
+        return ok
+
+    @functools.cached_property
+    def _domain_fn(self):
+        return self._fn("domain", self.domain_expr, (len(self.domain_expr),))
+
+    def with_params(self, **overrides):
+        """A copy with some parameter values replaced (by parameter name)."""
+        by_name = {k.name: k for k in self.params}
+        new = dict(self.params)
+        for key, val in overrides.items():
+            if key not in by_name:
+                raise ValueError(f"system {self.name}: unknown parameter '{key}' (has {', '.join(sorted(by_name))})")
+            new[by_name[key]] = float(val)
+        return System(self.name, self.q, self.theta_expr, self.H_expr, new, self.symmetry, self.domain_expr,
+                      self.defaults, self.momentum_name)
+
+    @property
+    def param_values(self) -> dict:
+        return {k.name: float(v) for k, v in self.params.items()}
+
+    def __repr__(self):
+        p = ", ".join(f"{k}={v:g}" for k, v in self.param_values.items())
+        return f"System({self.name}, d={self.d}{', ' if p else ''}{p})"
+
+
+def system_from(theta, H, q, name="user", params=None, symmetry=None, domain=(), defaults=None):
+    """A system from ϑ (list of sympy expressions), H and the coordinate symbols q.
+
+    Example
+    -------
+    >>> x, y = sympy.symbols("x y")
+    >>> sys = system_from([-y / 2, x / 2], (x**2 + y**2) / 2, [x, y])
+    """
+    if len(q) % 2:
+        raise ValueError(f"system {name}: dimension {len(q)} is odd; Ω̄ must be invertible (even d)")
+    return System(name, q, theta, H, params, symmetry, domain, defaults)
+
+
+# ----------------------------------------------------------------------------
+# built-in systems (paper parameters as defaults)
+# ----------------------------------------------------------------------------
+
+def _lotka_volterra_2d():
+    """sec:app_lotka_volterra_2d."""
+    q1, q2 = sympy.symbols("q1 q2", positive=True)
+    a1, a2, b1, b2 = sympy.symbols("a1 a2 b1 b2")
+    theta = [sympy.log(q2) / q1 + q2, q1]
+    H = a1 * q1 + a2 * q2 - b1 * sympy.log(q1) - b2 * sympy.log(q2)
+    return System("lotka_volterra_2d", [q1, q2], theta, H, {a1: 1.0, a2: 1.0, b1: 1.0, b2: 2.0},
+                  domain=[q1, q2], defaults={"q0": [1.0, 1.0], "h": 0.1})
+
+
+def _point_vortices():
+    """sec:app_planar_point_vortices, S(x, y) = 1 + x² + y², rotation symmetry."""
+    x1, y1, x2, y2 = sympy.symbols("x1 y1 x2 y2", real=True)
+    g1, g2 = sympy.symbols("gamma1 gamma2")
+    S1, S2 = 1 + x1**2 + y1**2, 1 + x2**2 + y2**2
+    theta = [-g1 * y1 * S1 / 2, g1 * x1 * S1 / 2, -g2 * y2 * S2 / 2, g2 * x2 * S2 / 2]
+    H = g1 * g2 / (2 * sympy.pi) * S1 * S2 * sympy.log((x1 - x2) ** 2 + (y1 - y2) ** 2)
+    # P = q¹ϑ₂ − q²ϑ₁ + q³ϑ₄ − q⁴ϑ₃ = ϑ·V for the rotation field V = (−y1, x1, −y2, x2)
+    return System("point_vortices", [x1, y1, x2, y2], theta, H, {g1: 0.1, g2: 0.1},
+                  symmetry=[-y1, x1, -y2, x2], momentum_name="angular momentum",
+                  defaults={"q0": [1.0, 0.1, 1.0, -0.1], "h": 0.1})
+
+
+def _guiding_centre_tokamak():
+    """app:guiding_centre_dynamics: q = (R, Z, φ, u), field of Qin et al. (2009)."""
+    R, Z, phi, u = sympy.symbols("R Z phi u", real=True)
+    R0, B0, q0, mu = sympy.symbols("R0 B0 q0 mu")
+    r2 = (R - R0) ** 2 + Z**2
+    S = sympy.sqrt(r2 + q0**2 * R0**2)
+    A_R = B0 * R0 * Z / (2 * R)
+    A_Z = -sympy.log(R / R0) * B0 * R0 / 2
+    A_phi = -B0 * r2 / (2 * q0 * R)
+    b_R, b_Z, b_phi = -Z / S, (R - R0) / S, -q0 * R0 / S
+    absB = B0 * S / (q0 * R)
+    theta = [A_R + u * b_R, A_Z + u * b_Z, R * (A_phi + u * b_phi), 0]
+    H = u**2 / 2 + mu * absB
+    return System("guiding_centre_tokamak", [R, Z, phi, u], theta, H,
+                  {R0: 2.0, B0: 5.0, q0: 2.0, mu: 0.01}, symmetry=[0, 0, 1, 0],
+                  momentum_name="toroidal momentum", domain=[R],
+                  defaults={"q0": [2.5, 0.0, 0.0, 0.5], "h": 2.5,
+                            "orbits": {"deeply trapped": (0.1, 5.0), "barely trapped": (0.3375, 3.0),
+                                       "barely passing": (0.3425, 2.5), "deeply passing": (0.5, 2.5)}})
+
+
+def _guiding_centre_symmetric():
+    """sec:app_integral_invariants: B = (0, 0, B₀(1 + x² + y²)), b = e_z."""
+    x, y, z, u = sympy.symbols("x y z u", real=True)
+    B0, mu = sympy.symbols("B0 mu")
+    rho = 2 + x**2 + y**2
+    theta = [-B0 * y * rho / 4, B0 * x * rho / 4, u, 0]
+    H = u**2 / 2 + mu * B0 * (1 + x**2 + y**2)
+    return System("guiding_centre_symmetric", [x, y, z, u], theta, H, {B0: 1.0, mu: 0.01},
+                  symmetry=[-y, x, 0, 0], momentum_name="angular momentum",
+                  defaults={"q0": [0.5, 0.0, 0.0, 0.5], "h": 10.0})
+
+
+_SYSTEMS = {
+    "lotka_volterra_2d": _lotka_volterra_2d,
+    "point_vortices": _point_vortices,
+    "guiding_centre_tokamak": _guiding_centre_tokamak,
+    "guiding_centre_symmetric": _guiding_centre_symmetric,
+}
+SYSTEM_NAMES = tuple(_SYSTEMS)
+
+
+@functools.lru_cache(maxsize=None)
+def _builtin(name):
+    return _SYSTEMS[name]()
+
+
+_ALIASES = {"gamma": ("gamma1", "gamma2"), "a": ("a1", "a2"), "b": ("b1", "b2")}
+
+
+def system(name: str, **params) -> System:
+    """A built-in system with the paper's parameters, any of which may be overridden.
+
+    Vector parameters may be given whole: ``system("point_vortices", gamma=(0.1, 0.1))``.
+    """
+    if name not in _SYSTEMS:
+        raise ValueError(f"unknown system '{name}'; choose one of {', '.join(SYSTEM_NAMES)}")
+    base = _builtin(name)
+    if not params:
+        return base
+    flat = {}
+    for key, val in params.items():
+        if key in _ALIASES and np.ndim(val) == 1:
+            if len(val) != len(_ALIASES[key]):
+                raise ValueError(f"system {name}: parameter '{key}' needs {len(_ALIASES[key])} values")
+            flat.update(zip(_ALIASES[key], val))
+        else:
+            flat[key] = val
+    return base.with_params(**flat)
