@@ -94,26 +94,16 @@ class Stepper:
         return out
 
     # -- the step -------------------------------------------------------------
-    def step(self, q, p, Lam, Y0, mu0):
-        """Advance n points by one step.
+    def equations(self, q, p, Lam):
+        """The nonlinear system of one step for n points.
 
-        Parameters
-        ----------
-        q, p : (n, d) current state (p is ignored by projected methods: p_n = ϑ(q_n))
-        Lam : (n, d) last Λ = hλ (guess for standard/symmetric/midpoint; Λ_n for symplectic)
-        Y0 : (n, s, d) guess of the stage displacements
-        mu0 : (n, d) guess of the Lobatto multiplier
-
-        Returns
-        -------
-        StepResult with increments ``inc_q`` (to be added to q with compensated
-        summation), ``p`` (p_{n+1} as the method computes it), ``Lam`` (Λ of this
-        step), ``Y``/``mu`` (for the next guess), ``ok`` (n,) and ``iterations`` (n,).
+        Returns ``(fun, unpack, qbar, pbar, Theta_q)`` where ``fun(idx, z) -> (r, J)``
+        evaluates the residual (m, nz) and its exact Jacobian (m, nz, nz) for the rows
+        ``idx`` with unknowns z = [Y_1 … Y_s, Λ (coupled projections), μ (Lobatto)].
         """
         sysm, tab, h, sig = self.system, self.tableau, self.h, self.sigma
         s, d = self.s, self.d
         proj = self.projection
-        n = q.shape[0]
         if proj == "none":
             qbar, pbar = q, p
         elif proj == "symplectic":
@@ -151,7 +141,7 @@ class Stepper:
                 pb = pb + vprk.transpose_apply(Tx, L)
             st = vprk.Stages(sysm, tab, h, q0, Y)
             R = vprk.stage_residual(tab, st, pb, mu)
-            J = np.zeros((m, self.nz, self.nz))
+            J = np.zeros((m, self.nz, self.nz), dtype=z.dtype)
             blocks = vprk.stage_jacobian_blocks(tab, st)
             for i in range(s):
                 for j in range(s):
@@ -196,6 +186,32 @@ class Stepper:
                 res.append(vprk.weigh(tab.d, np.zeros_like(tab.d), Y))
             return np.concatenate(res, axis=1), J
 
+        return fun, unpack, qbar, pbar, Theta_q
+
+    def step(self, q, p, Lam, Y0, mu0):
+        """Advance n points by one step.
+
+        Parameters
+        ----------
+        q, p : (n, d) current state (p is ignored by projected methods: p_n = ϑ(q_n))
+        Lam : (n, d) last Λ = hλ (guess for standard/symmetric/midpoint; Λ_n for symplectic)
+        Y0 : (n, s, d) guess of the stage displacements
+        mu0 : (n, d) guess of the Lobatto multiplier
+
+        Returns
+        -------
+        StepResult with increments ``inc_q`` (to be added to q with compensated
+        summation), ``p`` (p_{n+1} as the method computes it), ``Lam`` (Λ of this
+        step), ``Y``/``mu`` (for the next guess), ``ok`` (n,) and ``iterations`` (n,).
+        """
+        sysm, tab, h, sig = self.system, self.tableau, self.h, self.sigma
+        s, d = self.s, self.d
+        proj = self.projection
+        n = q.shape[0]
+        sd = s * d
+        iL = sd if self.coupled else None
+        iM = sd + (d if self.coupled else 0) if self.lobatto else None
+        fun, unpack, qbar, pbar, Theta_q = self.equations(q, p, Lam)
         z0 = np.empty((n, self.nz))
         z0[:, :sd] = Y0.reshape(n, sd)
         if self.coupled:

@@ -1,0 +1,95 @@
+"""Systems: generated derivatives against complex-step differentiation, vector field, momenta."""
+import numpy as np
+import pytest
+import sympy
+
+import integrators
+from integrators.systems import SYSTEM_NAMES
+
+EPS_CS = 1e-30
+
+
+def sample_points(system, rng, n=7):
+    q0 = np.array(system.defaults["q0"], dtype=float)
+    return q0 + 0.05 * rng.standard_normal((n, system.d))
+
+
+def complex_step(f, q, shape_out):
+    """∂f/∂q^j by the complex step: exact to round-off, no subtraction."""
+    out = np.empty(q.shape[:-1] + shape_out + (q.shape[-1],))
+    for j in range(q.shape[-1]):
+        qc = q.astype(complex)
+        qc[..., j] += 1j * EPS_CS
+        out[..., j] = f(qc).imag / EPS_CS
+    return out
+
+
+@pytest.mark.parametrize("name", SYSTEM_NAMES)
+def test_derivatives_match_complex_step(name, rng):
+    sy = integrators.system(name)
+    q = sample_points(sy, rng)
+    d = sy.d
+    for f, df, shape in [(sy.theta, sy.dtheta, (d,)), (sy.dtheta, sy.ddtheta, (d, d)),
+                         (sy.H, sy.dH, ()), (sy.dH, sy.ddH, (d,))]:
+        ref = complex_step(f, q, shape)
+        got = df(q)
+        assert np.max(np.abs(got - ref)) <= 1e-13 * max(1.0, np.max(np.abs(ref))), (name, f.__name__)
+
+
+@pytest.mark.parametrize("name", SYSTEM_NAMES)
+def test_energy_and_momentum_are_first_integrals_of_the_vector_field(name, rng):
+    sy = integrators.system(name)
+    q = sample_points(sy, rng)
+    v = sy.vector_field(q)
+    assert np.max(np.abs(np.sum(sy.dH(q) * v, axis=-1))) < 1e-14 * np.max(np.abs(sy.dH(q))) * np.max(np.abs(v)) * 10
+    if sy.has_momentum:
+        dP = complex_step(sy.momentum, q, ())
+        assert np.max(np.abs(np.sum(dP * v, axis=-1))) < 1e-13
+
+
+def test_guiding_centre_moves_along_b_with_parallel_velocity(rng):
+    """b·ẋ = u fixes the orientation of Ω̄ (see docs/conventions.md)."""
+    sy = integrators.system("guiding_centre_symmetric")
+    q = sample_points(sy, rng)
+    v = sy.vector_field(q)
+    assert np.allclose(v[:, 2], q[:, 3], rtol=1e-14, atol=0)
+
+
+def test_lotka_volterra_omega_matches_paper(rng):
+    sy = integrators.system("lotka_volterra_2d")
+    q = np.abs(sample_points(sy, rng))
+    Om = sy.Omega(q)
+    assert np.allclose(Om[:, 0, 1], -1 / (q[:, 0] * q[:, 1]), rtol=1e-15)
+
+
+def test_point_vortex_momentum_is_the_papers_P(rng):
+    sy = integrators.system("point_vortices")
+    q = sample_points(sy, rng)
+    th = sy.theta(q)
+    P = q[:, 0] * th[:, 1] - q[:, 1] * th[:, 0] + q[:, 2] * th[:, 3] - q[:, 3] * th[:, 2]
+    assert np.allclose(sy.momentum(q), P, rtol=1e-15)
+
+
+def test_domain_and_parameters():
+    lv = integrators.system("lotka_volterra_2d")
+    assert lv.in_domain(np.array([[1.0, 2.0], [0.0, 1.0], [1.0, np.inf]])).tolist() == [True, False, False]
+    assert integrators.system("point_vortices", gamma=(0.2, 0.3)).param_values == {"gamma1": 0.2, "gamma2": 0.3}
+    with pytest.raises(ValueError, match="unknown parameter 'nu'"):
+        integrators.system("guiding_centre_symmetric", nu=1.0)
+    with pytest.raises(ValueError, match="unknown system"):
+        integrators.system("pendulum")
+
+
+def test_user_system_midpoint_rule_is_the_cayley_map():
+    """ϑ = (−y/2, x/2), H = |q|²/2: ẋ = −y, ẏ = x; GLRK1 is exactly the Cayley transform."""
+    x, y = sympy.symbols("x y")
+    osc = integrators.system_from([-y / 2, x / 2], (x**2 + y**2) / 2, [x, y], symmetry=[-y, x])
+    h = 0.3
+    A = np.array([[0.0, -1.0], [1.0, 0.0]])
+    C = np.linalg.solve(np.eye(2) - h / 2 * A, np.eye(2) + h / 2 * A)
+    q0 = np.array([[1.0, 0.2]])
+    sol = integrators.integrate(osc, q0, tableau="GLRK1", projection="none", h=h, steps=10)
+    ref = q0[0]
+    for k in range(1, 11):
+        ref = C @ ref
+        assert np.max(np.abs(sol.q[k, 0] - ref)) < 4e-16 * k + 1e-16
