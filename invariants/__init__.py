@@ -1,0 +1,14 @@
+"""Poincaré integral invariants on loops and surfaces (sec:app_integral_invariants).
+
+    import invariants
+    q = invariants.loop("guiding_centre", 2000)                 # (N, d)
+    I1 = invariants.first_invariant(q, "noncanonical", system=sys)
+    S = invariants.surface("guiding_centre", 100, 100)          # (nσ, nτ, d)
+    I2 = invariants.second_invariant(S, "noncanonical", system=sys)
+    I1.value, I1.resolution, I1.under_resolved
+"""
+from .forms import FORMS, UNDER_RESOLVED, InvariantValue, corrected_omega, first_invariant, second_invariant
+from .samples import loop, loop_parameters, surface, surface_parameters
+
+__all__ = ["first_invariant", "second_invariant", "loop", "surface", "loop_parameters", "surface_parameters",
+           "FORMS", "UNDER_RESOLVED", "InvariantValue", "corrected_omega"]

@@ -1,0 +1,152 @@
+"""First and second Poincaré integral invariants (sec:app_integral_invariants).
+
+Sign conventions (docs/conventions.md):
+
+* Ω̄_ij = ∂_iϑ_j − ∂_jϑ_i, so dϑ = ½ Ω̄_ij dq^i ∧ dq^j.
+* I₁[γ] = ∮ α(q) (dq/dτ) dτ with τ ∈ [0, 1) in the loop's sample order.
+* I₂[S] = ∫∫ Ω_ab x_σ^a x_τ^b dσ dτ for the two-form ½Ω_ab dx^a ∧ dx^b, σ the first
+  and τ the second array axis; by Stokes I₂[S] = I₁[∂S] with ∂S traversed
+  counter-clockwise in the (σ, τ) square (σ = 1 side run with τ increasing).
+
+Forms (λ in the units of the paper; the corrected forms need h):
+
+========== ===================================== ==============================================
+form        one-form                               two-form
+========== ===================================== ==============================================
+noncanonical ϑ_i(q) dq^i                            ½ Ω̄_ij dq^i ∧ dq^j
+canonical    p_i dq^i                               dp_i ∧ dq^i
+corrected    ϑ_λ = (ϑ_i − hλ^kϑ_{k,i})(dq^i − h dλ^i)  dϑ_λ on (q, λ): see :func:`corrected_omega`
+             (eq:symplectic_projection_one_form)
+========== ===================================== ==============================================
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from . import spectral
+
+FORMS = ("canonical", "noncanonical", "corrected")
+UNDER_RESOLVED = 1e-10   # documented threshold of the resolution monitor
+
+
+@dataclasses.dataclass(frozen=True)
+class InvariantValue:
+    """An invariant with its resolution monitor.
+
+    value : float
+    resolution : relative size of the highest modes of the sampled set (and fields)
+    under_resolved : resolution > UNDER_RESOLVED (1e-10)
+    """
+
+    value: float
+    resolution: float
+    under_resolved: bool
+
+    def __float__(self):
+        return self.value
+
+
+def _check(q, ndim, what):
+    q = np.asarray(q, dtype=float)
+    if q.ndim != ndim:
+        raise ValueError(f"{what} must have {ndim} dimensions, got shape {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError(f"{what} contains non-finite values")
+    return q
+
+
+def _need(x, name, form):
+    if x is None:
+        raise ValueError(f"form '{form}' needs {name}")
+    return x
+
+
+def one_form_coefficients(q, form, system=None, p=None, lam=None, h=None):
+    """Coefficients (A_q, A_λ) of the one-form at the samples; A_λ is None unless corrected."""
+    if form == "canonical":
+        return _check(_need(p, "p", form), q.ndim, "p"), None
+    if form not in FORMS:
+        raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
+    th = _need(system, "system", form).theta(q)
+    if form == "noncanonical":
+        return th, None
+    lam = _check(_need(lam, "lam", form), q.ndim, "lam")
+    h = float(_need(h, "h", form))
+    # w_i = ϑ_i − h λ^k ϑ_{k,i}
+    T = system.dtheta(q)
+    w = th - h * np.sum(T * lam[..., :, None], axis=-2)
+    return w, -h * w
+
+
+def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None) -> InvariantValue:
+    """I₁ = ∮ A(q) dq/dτ dτ over a loop q (N, d) sampled at τ_j = j/N (FFT derivative, trapezoid).
+
+    form : 'noncanonical' (needs system), 'canonical' (needs p), 'corrected' (needs system, lam, h)
+    """
+    q = _check(q, 2, "loop q")
+    A, Al = one_form_coefficients(q, form, system, p, lam, h)
+    dq = spectral.loop_derivative(q)
+    integrand = np.sum(A * dq, axis=1)
+    fields = [q]
+    if Al is not None:
+        integrand = integrand + np.sum(Al * spectral.loop_derivative(lam), axis=1)
+        fields.append(lam)
+    if form == "canonical":
+        fields.append(p)
+    res = max(spectral.loop_tail(f) for f in fields)
+    return InvariantValue(float(spectral.loop_integral(integrand)), res, res > UNDER_RESOLVED)
+
+
+def corrected_omega(system, q, lam, h, paper_sign=False):
+    """Ω_λ of dϑ_λ on (q, λ) at the points: (..., 2d, 2d).
+
+    With w_i = ϑ_i − hλ^kϑ_{k,i} and ϑ_λ = w_i dq^i − h w_i dλ^i, the exterior derivative is
+
+        Ω_λ = [[ Ω̄,            +h² λ·ϑ_qq ],
+               [ −h² λ·ϑ_qq,   −h² Ω̄     ]],   (λ·ϑ_qq)_ij = λ^k ϑ_{k,ij}.
+
+    eq:symplectic_projection_two_form prints the mixed blocks with the opposite sign;
+    ``paper_sign=True`` evaluates that printed version (for the Stokes comparison in
+    the tests and docs only).
+    """
+    T = system.dtheta(q)
+    Om = np.swapaxes(T, -1, -2) - T
+    Lq = np.sum(system.ddtheta(q) * lam[..., :, None, None], axis=-3)
+    sgn = -1.0 if paper_sign else 1.0
+    top = np.concatenate([Om, sgn * h * h * Lq], axis=-1)
+    bottom = np.concatenate([-sgn * h * h * Lq, -h * h * Om], axis=-1)
+    return np.concatenate([top, bottom], axis=-2)
+
+
+def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None,
+                     paper_sign=False) -> InvariantValue:
+    """I₂ = ∫∫ Ω_ab x_σ^a x_τ^b dσ dτ over a surface q (n_σ, n_τ, d) at Chebyshev points.
+
+    form : 'noncanonical' (Ω̄(q), needs system), 'canonical' (∫∫ p_σ·q_τ − p_τ·q_σ, needs p),
+    'corrected' (dϑ_λ on (q, λ), needs system, lam, h).
+    """
+    q = _check(q, 3, "surface q")
+    qs, qt = spectral.chebyshev_derivative(q, 0), spectral.chebyshev_derivative(q, 1)
+    fields = [q]
+    if form == "canonical":
+        p = _check(_need(p, "p", form), 3, "p")
+        ps, pt = spectral.chebyshev_derivative(p, 0), spectral.chebyshev_derivative(p, 1)
+        integrand = np.sum(ps * qt - pt * qs, axis=-1)
+        fields.append(p)
+    elif form == "noncanonical":
+        Om = _need(system, "system", form).Omega(q)
+        integrand = np.einsum("...i,...ij,...j->...", qs, Om, qt)
+    elif form == "corrected":
+        lam = _check(_need(lam, "lam", form), 3, "lam")
+        h = float(_need(h, "h", form))
+        Om = corrected_omega(_need(system, "system", form), q, lam, h, paper_sign)
+        xs = np.concatenate([qs, spectral.chebyshev_derivative(lam, 0)], axis=-1)
+        xt = np.concatenate([qt, spectral.chebyshev_derivative(lam, 1)], axis=-1)
+        integrand = np.einsum("...i,...ij,...j->...", xs, Om, xt)
+        fields.append(lam)
+    else:
+        raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
+    res = max(spectral.surface_tail(f) for f in fields)
+    return InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)

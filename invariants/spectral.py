@@ -1,0 +1,138 @@
+"""Spectral calculus on loops (Fourier) and surfaces (Chebyshev), batched over trailing axes.
+
+Loops: N equispaced τ_j = j/N on [0, 1); dq/dτ by FFT (pyfftw plans built once per
+array shape and reused); ∮ f dτ by the trapezoidal rule (spectrally accurate for
+smooth periodic f).
+
+Surfaces: Chebyshev points of the second kind mapped to [0, 1], ascending,
+x_k = (1 + chebpts2_k)/2; values → Chebyshev coefficients by a DCT-I along each
+axis (the transform chebpy's ``vals2coeffs2`` applies in 1-D); derivatives by the
+coefficient recurrence; tensor Clenshaw–Curtis quadrature.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pyfftw
+import scipy.fft
+from chebpy.algorithms import chebpts2
+from numpy.polynomial import chebyshev as C
+
+# ----------------------------------------------------------------------------- loops
+
+_PLANS: dict = {}
+
+
+def _plans(shape):
+    """Forward and inverse real FFT plans along axis 0 for arrays of ``shape`` (cached)."""
+    key = tuple(shape)
+    if key not in _PLANS:
+        a = pyfftw.empty_aligned(shape, dtype="float64")
+        fwd = pyfftw.builders.rfft(a, axis=0, planner_effort="FFTW_ESTIMATE", threads=1)
+        spec = pyfftw.empty_aligned(fwd.output_shape, dtype="complex128")
+        inv = pyfftw.builders.irfft(spec, n=shape[0], axis=0, planner_effort="FFTW_ESTIMATE", threads=1)
+        _PLANS[key] = (fwd, inv)
+    return _PLANS[key]
+
+
+def fourier_coefficients(f):
+    """rfft of f along axis 0 divided by N: (N//2 + 1, ...)."""
+    fwd, _ = _plans(f.shape)
+    return fwd(np.ascontiguousarray(f, dtype=float)) / f.shape[0]
+
+
+def loop_derivative(f):
+    """df/dτ of samples f (N, ...) at τ_j = j/N, τ ∈ [0, 1): spectral, Nyquist mode dropped."""
+    N = f.shape[0]
+    fwd, inv = _plans(f.shape)
+    fh = fwd(np.ascontiguousarray(f, dtype=float)).copy()
+    k = np.arange(fh.shape[0], dtype=float)
+    if N % 2 == 0:
+        k[-1] = 0.0
+    fh *= (2j * np.pi * k).reshape((-1,) + (1,) * (f.ndim - 1))
+    return inv(fh).copy()
+
+
+def loop_integral(f):
+    """∮ f dτ over [0, 1) by the trapezoidal rule: mean over axis 0."""
+    return np.sum(f, axis=0) / f.shape[0]
+
+
+def loop_tail(f):
+    """Relative size of the highest Fourier modes: max |f̂_k|, k ≥ 7/8·N/2, over max |f̂|."""
+    fh = np.abs(fourier_coefficients(f))
+    K = fh.shape[0]
+    top = max(1, K - max(K // 8, 2))
+    peak = np.max(fh)
+    return float(np.max(fh[top:]) / peak) if peak > 0 else 0.0
+
+
+# ----------------------------------------------------------------------------- surfaces
+
+@functools.lru_cache(maxsize=None)
+def chebyshev_points(n: int) -> np.ndarray:
+    """n Chebyshev points of the second kind on [0, 1], ascending."""
+    if n < 2:
+        raise ValueError("a surface needs at least 2 Chebyshev points per direction")
+    x = (1.0 + chebpts2(n)) / 2.0
+    x[0], x[-1] = 0.0, 1.0
+    return x
+
+
+def chebyshev_coefficients(v, axis):
+    """Values at ascending Chebyshev points → coefficients of Σ c_j T_j(2x − 1) along ``axis`` (DCT-I)."""
+    n = v.shape[axis]
+    c = scipy.fft.dct(np.flip(v, axis=axis), type=1, axis=axis) / (n - 1)
+    sl = [slice(None)] * v.ndim
+    for end in (0, n - 1):
+        sl[axis] = end
+        c[tuple(sl)] /= 2
+    return c
+
+
+def chebyshev_values(c, axis):
+    """Coefficients → values at the ascending Chebyshev points (inverse of the above)."""
+    n = c.shape[axis]
+    c = c.copy()
+    sl = [slice(None)] * c.ndim
+    sl[axis] = slice(1, n - 1)
+    c[tuple(sl)] /= 2
+    return np.flip(scipy.fft.dct(c, type=1, axis=axis), axis=axis)
+
+
+def chebyshev_derivative(v, axis):
+    """∂v/∂x along ``axis`` for values at Chebyshev points on [0, 1]."""
+    n = v.shape[axis]
+    c = chebyshev_coefficients(v, axis)
+    dc = C.chebder(c, axis=axis, scl=2.0)  # d/dx = 2 d/dξ for x = (1 + ξ)/2
+    pad = [(0, 0)] * v.ndim
+    pad[axis] = (0, 1)
+    return chebyshev_values(np.pad(dc, pad), axis)
+
+
+@functools.lru_cache(maxsize=None)
+def clenshaw_curtis_weights(n: int) -> np.ndarray:
+    """Weights w with Σ w_k f(x_k) = ∫_0^1 f for the interpolant at the n Chebyshev points."""
+    moments = np.zeros(n)
+    j = np.arange(0, n, 2)
+    moments[::2] = 2.0 / (1.0 - j.astype(float) ** 2)
+    # w = Tᵀ m, T the values → coefficients map
+    T = chebyshev_coefficients(np.eye(n), axis=0)
+    return 0.5 * (T.T @ moments)
+
+
+def surface_integral(f):
+    """∫_0^1 ∫_0^1 f dσ dτ for f (nσ, nτ, ...) at Chebyshev points: tensor Clenshaw–Curtis."""
+    ws, wt = clenshaw_curtis_weights(f.shape[0]), clenshaw_curtis_weights(f.shape[1])
+    return np.tensordot(ws, np.tensordot(wt, f, axes=([0], [1])), axes=([0], [0]))
+
+
+def surface_tail(v):
+    """Relative size of the Chebyshev coefficients with index ≥ 7/8 n in either direction."""
+    c = np.abs(chebyshev_coefficients(chebyshev_coefficients(v, 0), 1))
+    ns, nt = c.shape[:2]
+    ks, kt = max(1, ns - max(ns // 8, 2)), max(1, nt - max(nt // 8, 2))
+    peak = np.max(c)
+    tail = max(np.max(c[ks:]), np.max(c[:, kt:]))
+    return float(tail / peak) if peak > 0 else 0.0
