@@ -1,0 +1,81 @@
+"""Spectral convergence of I₁ and I₂ against closed-form values (docs/invariants.md).
+
+    python scripts/invariants_convergence.py
+
+Loop: the paper's guiding-centre loop and the same loop advected by the exact flow
+to t = 500 (rotation by 2μt/(1 + r²), strongly sheared).  Surface: the paper's
+surface, and advected to t = 500.  The reference is the value at t = 0 computed
+in closed form with sympy (the exact flow preserves it).
+"""
+from pathlib import Path
+
+import numpy as np
+import sympy
+
+import integrators
+import invariants
+
+ROOT = Path(__file__).resolve().parents[1]
+GC = integrators.system("guiding_centre_symmetric")
+
+
+def exact_values():
+    t, s = sympy.symbols("tau sigma", real=True)
+    R, pi = sympy.Rational, sympy.pi
+    c, sn = sympy.cos(2 * pi * t), sympy.sin(2 * pi * t)
+    q = [R(1, 2) * c, R(3, 10) * sn, R(1, 10) * sn, R(1, 2) + R(1, 20) * c]
+    th = [e.subs(GC.params).subs(dict(zip(GC.q, q))) for e in GC.theta_expr]
+    I1 = sympy.integrate(sympy.expand(sum(a * sympy.diff(b, t) for a, b in zip(th, q))), (t, 0, 1))
+    x, y = R(1, 10) * (s - R(1, 2)), R(1, 10) * (t - R(1, 2))
+    z = R(1, 10) * sympy.cos(2 * pi * s) * sympy.cos(2 * pi * t)
+    u = R(1, 2) + R(1, 100) * sympy.sin(2 * pi * s) * sympy.sin(2 * pi * t)
+    dens = (1 + x**2 + y**2) * (sympy.diff(x, s) * sympy.diff(y, t) - sympy.diff(y, s) * sympy.diff(x, t)) \
+        + (sympy.diff(u, s) * sympy.diff(z, t) - sympy.diff(z, s) * sympy.diff(u, t))
+    I2 = sympy.integrate(sympy.expand(dens), (s, 0, 1), (t, 0, 1))
+    return sympy.N(I1, 30), sympy.N(I2, 30), I1, I2
+
+
+def flow(q, t, mu=0.01):
+    r2 = q[..., 0] ** 2 + q[..., 1] ** 2
+    a = 2 * mu * t / (1 + r2)
+    out = q.copy()
+    out[..., 0] = np.cos(a) * q[..., 0] - np.sin(a) * q[..., 1]
+    out[..., 1] = np.sin(a) * q[..., 0] + np.cos(a) * q[..., 1]
+    out[..., 2] = q[..., 2] + q[..., 3] * t
+    return out
+
+
+def main():
+    I1x, I2x, I1s, I2s = exact_values()
+    I1x, I2x = float(I1x), float(I2x)
+    lines = ["# Invariants: spectral convergence", "",
+             "Produced by `python scripts/invariants_convergence.py`. Exact values (sympy): "
+             f"I₁ = `{sympy.simplify(I1s)}` = {I1x:.17g} for the paper's loop, "
+             f"I₂ = `{sympy.simplify(I2s)}` = {I2x:.17g} for the paper's surface "
+             "(guiding_centre_symmetric, B₀ = 1, μ = 0.01). 'advected' = the same set moved by the exact flow "
+             "to t = 500 (differential rotation by 2μt/(1 + r²) about z, z += u t), which leaves both values "
+             "unchanged. Columns: relative error |I − I_exact|/|I_exact| and the resolution monitor "
+             "(relative size of the top 1/8 of the modes; flagged above 1e-10).", "",
+             "## I₁ on the loop (FFT, trapezoidal rule)", "",
+             "| N | error t=0 | monitor t=0 | error advected | monitor advected |", "|---|---|---|---|---|"]
+    for N in (8, 16, 32, 64, 128, 256, 512, 1000, 2000):
+        q = invariants.loop("guiding_centre", N)
+        a = invariants.first_invariant(q, "noncanonical", system=GC)
+        b = invariants.first_invariant(flow(q, 500.0), "noncanonical", system=GC)
+        lines.append(f"| {N} | {abs(a.value - I1x) / abs(I1x):.1e} | {a.resolution:.1e} | "
+                     f"{abs(b.value - I1x) / abs(I1x):.1e} | {b.resolution:.1e}{' (flagged)' if b.under_resolved else ''} |")
+    lines += ["", "## I₂ on the surface (Chebyshev, Clenshaw–Curtis)", "",
+              "| n_σ = n_τ | error t=0 | monitor t=0 | error advected | monitor advected |", "|---|---|---|---|---|"]
+    for n in (6, 8, 12, 16, 24, 32, 48, 64, 100):
+        S = invariants.surface("guiding_centre", n, n)
+        a = invariants.second_invariant(S, "noncanonical", system=GC)
+        b = invariants.second_invariant(flow(S, 500.0), "noncanonical", system=GC)
+        lines.append(f"| {n} | {abs(a.value - I2x) / abs(I2x):.1e} | {a.resolution:.1e}{' (flagged)' if a.under_resolved else ''} | "
+                     f"{abs(b.value - I2x) / abs(I2x):.1e} | {b.resolution:.1e}{' (flagged)' if b.under_resolved else ''} |")
+    text = "\n".join(lines) + "\n"
+    print(text)
+    (ROOT / "docs" / "invariants.md").write_text(text)
+
+
+if __name__ == "__main__":
+    main()
