@@ -27,6 +27,10 @@ def cmd_run(args) -> int:
     import integrators
     system = integrators.system(args.system)
     h = args.h if args.h is not None else system.defaults["h"]
+    for tab in args.tableau:                 # validate everything before any output
+        integrators.tableau(tab)
+    if args.points < 1 or args.steps < 1:
+        raise ValueError("--points and --steps must be positive")
     q = _demo_loop(system, args.points)
     print(f"{system}  points={args.points}  h={h:g}  steps={args.steps}")
     print(f"{'pair':24s} {'status':8s} {'max|ΔH/H|':>11s} {'max|ΔP|':>11s} {'max|p−ϑ(q)|':>12s} {'newton/step':>11s} {'wall [s]':>9s}")
