@@ -77,8 +77,9 @@ class System:
     """
 
     def __init__(self, name, q, theta, H, params=None, symmetry=None, domain=(), defaults=None,
-                 momentum_name=None):
+                 momentum_name=None, flow=None):
         self.name = name
+        self._flow = flow
         self.q = tuple(q)
         self.d = len(self.q)
         if len(theta) != self.d:
@@ -202,7 +203,17 @@ class System:
                 raise ValueError(f"system {self.name}: unknown parameter '{key}' (has {', '.join(sorted(by_name))})")
             new[by_name[key]] = float(val)
         return System(self.name, self.q, self.theta_expr, self.H_expr, new, self.symmetry, self.domain_expr,
-                      self.defaults, self.momentum_name)
+                      self.defaults, self.momentum_name, self._flow)
+
+    @property
+    def has_exact_flow(self) -> bool:
+        return self._flow is not None
+
+    def exact_flow(self, q, t):
+        """The exact time-t flow map applied to q (..., d), where a closed form is known."""
+        if self._flow is None:
+            raise ValueError(f"system {self.name} has no closed-form flow")
+        return self._flow(np.asarray(q, dtype=float), float(t), self.param_values)
 
     @property
     def param_values(self) -> dict:
@@ -274,6 +285,22 @@ def _guiding_centre_tokamak():
                                        "barely passing": (0.3425, 2.5), "deeply passing": (0.5, 2.5)}})
 
 
+def _guiding_centre_symmetric_flow(q, t, p):
+    """Exact flow of guiding_centre_symmetric.
+
+    Ω̄_xy = B₀(1 + r²), Ω̄_uz = 1 and ∇H = (2μB₀x, 2μB₀y, 0, u) give ẋ = −ωy, ẏ = ωx with
+    ω = 2μ/(1 + r²), ż = u, u̇ = 0: a rotation about z by 2μt/(1 + r²) (r and u are constant)
+    and a shift z += u t.  A reference for tests and benchmarks (a nonlinear shear flow).
+    """
+    r2 = q[..., 0] ** 2 + q[..., 1] ** 2
+    ang = 2.0 * p["mu"] * t / (1.0 + r2)
+    out = q.copy()
+    out[..., 0] = np.cos(ang) * q[..., 0] - np.sin(ang) * q[..., 1]
+    out[..., 1] = np.sin(ang) * q[..., 0] + np.cos(ang) * q[..., 1]
+    out[..., 2] = q[..., 2] + q[..., 3] * t
+    return out
+
+
 def _guiding_centre_symmetric():
     """sec:app_integral_invariants: B = (0, 0, B₀(1 + x² + y²)), b = e_z."""
     x, y, z, u = sympy.symbols("x y z u", real=True)
@@ -283,7 +310,7 @@ def _guiding_centre_symmetric():
     H = u**2 / 2 + mu * B0 * (1 + x**2 + y**2)
     return System("guiding_centre_symmetric", [x, y, z, u], theta, H, {B0: 1.0, mu: 0.01},
                   symmetry=[-y, x, 0, 0], momentum_name="angular momentum",
-                  defaults={"q0": [0.5, 0.0, 0.0, 0.5], "h": 10.0})
+                  defaults={"q0": [0.5, 0.0, 0.0, 0.5], "h": 10.0}, flow=_guiding_centre_symmetric_flow)
 
 
 _SYSTEMS = {
