@@ -62,7 +62,7 @@ class State:
         self.Lam = h * lam
         self.q_comp = np.zeros_like(q)
         self.p_comp = np.zeros_like(q)
-        self.Y = np.zeros((n, s, d))
+        self.Y = np.zeros((n, s, d))              # stage displacements of the last step
         self.mu = np.zeros_like(q)
         self.have_history = np.zeros(n, dtype=bool)
         self.live = np.ones(n, dtype=bool)
@@ -78,20 +78,12 @@ def _kahan(x, comp, inc):
     return t, y - (t - x)
 
 
-def advance(stepper: Stepper, state: State, t_next: float):
-    """Advance every live point of ``state`` by one step (in place)."""
-    idx = np.flatnonzero(state.live)
-    if idx.size == 0:
-        return
+def _attempt(stepper, state, idx, guess, mu0):
+    """One step for the points idx from the given guesses; returns (ok, new values)."""
     sysm = stepper.system
     q = state.q[idx]
-    Y0 = state.Y[idx]
-    fresh = ~state.have_history[idx]
-    guess = stepper.extrapolate(Y0)
-    if fresh.any():
-        guess[fresh] = stepper.first_guess(q[fresh])
     with np.errstate(all="ignore"):
-        res = stepper.step(q, state.p[idx], state.Lam[idx], guess, state.mu[idx])
+        res = stepper.step(q, state.p[idx], state.Lam[idx], guess, mu0)
         q_new, qc_new = _kahan(q, state.q_comp[idx], res.inc_q)
         if res.inc_p is None:
             p_new, pc_new = res.p, state.p_comp[idx]
@@ -99,7 +91,12 @@ def advance(stepper: Stepper, state: State, t_next: float):
             p_new, pc_new = _kahan(state.p[idx], state.p_comp[idx], res.inc_p)
         ok = res.ok & sysm.in_domain(q_new) & np.all(np.isfinite(p_new), axis=1)
         ok &= np.all(np.isfinite(res.Lam), axis=1)
-    good, bad = idx[ok], idx[~ok]
+    return ok, (q_new, qc_new, p_new, pc_new, res)
+
+
+def _commit(state, idx, ok, new):
+    q_new, qc_new, p_new, pc_new, res = new
+    good = idx[ok]
     state.q[good], state.q_comp[good] = q_new[ok], qc_new[ok]
     state.p[good], state.p_comp[good] = p_new[ok], pc_new[ok]
     state.Lam[good] = res.Lam[ok]
@@ -109,6 +106,30 @@ def advance(stepper: Stepper, state: State, t_next: float):
     state.have_history[good] = True
     state.iterations[idx] += res.iterations
     state.steps[good] += 1
+
+
+def advance(stepper: Stepper, state: State, t_next: float):
+    """Advance every live point of ``state`` by one step (in place).
+
+    A point whose step fails from the extrapolated guess is tried once more from the
+    vector-field guess h·q̇(q_n) before it is declared broken down.
+    """
+    idx = np.flatnonzero(state.live)
+    if idx.size == 0:
+        return
+    fresh = ~state.have_history[idx]
+    guess = stepper.extrapolate(state.Y[idx])
+    if fresh.any():
+        guess[fresh] = stepper.first_guess(state.q[idx[fresh]])
+    ok, new = _attempt(stepper, state, idx, guess, state.mu[idx])
+    _commit(state, idx, ok, new)
+    retry = ~ok & ~fresh
+    if retry.any():
+        ridx = idx[retry]
+        ok_r, new_r = _attempt(stepper, state, ridx, stepper.first_guess(state.q[ridx]), np.zeros_like(state.q[ridx]))
+        _commit(state, ridx, ok_r, new_r)
+        ok[retry] = ok_r
+    bad = idx[~ok]
     state.live[bad] = False
     state.breakdown_time[bad] = t_next
 

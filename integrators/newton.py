@@ -11,30 +11,46 @@ import numpy as np
 EPS = np.finfo(float).eps
 
 
-def solve_batched(J, r):
-    """Solve J x = r for a stack of matrices; singular systems give NaN rows instead of raising.
+def invert_batched(J):
+    """Inverses of a stack of matrices; a singular matrix gives a NaN inverse instead of raising.
 
-    J : (n, m, m), r : (n, m) -> (n, m)
+    J : (n, m, m) -> (n, m, m).  Each matrix is inverted on its own (LAPACK per matrix), so the
+    result for one point does not depend on the others.
     """
     try:
-        return np.linalg.solve(J, r[..., None])[..., 0]
+        return np.linalg.inv(J)
     except np.linalg.LinAlgError:
-        out = np.full_like(r, np.nan)
+        out = np.full_like(J, np.nan)
         for k in range(J.shape[0]):  # rare path: isolate the singular points
             try:
-                out[k] = np.linalg.solve(J[k], r[k])
+                out[k] = np.linalg.inv(J[k])
             except np.linalg.LinAlgError:
                 pass
         return out
 
 
-def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=30):
+def apply_batched(M, r):
+    """M r for stacks (n, m, m) and (n, m).
+
+    numpy's stacked matmul multiplies each matrix by its vector on its own, so a point's
+    bits do not depend on the batch (tests/test_integrate.py checks this bitwise).
+    """
+    return np.matmul(M, r[..., None])[..., 0]
+
+
+def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25):
     """Solve fun(idx, z)[0] = 0 for every row of z.
+
+    Newton's method with the exact Jacobian, kept across iterations while it works: the
+    Jacobian is evaluated and inverted at the first iteration and again for any point whose
+    update shrank by less than the factor ``refresh`` in its last iteration.  Between
+    refreshes an iteration costs one residual evaluation and a matrix–vector product.
 
     Parameters
     ----------
-    fun : callable(idx, z) -> (r, J); idx (m,) indices of active rows, z (m, nz),
-          r (m, nz) residuals, J (m, nz, nz) Jacobians
+    fun : callable(idx, z, jacobian) -> (r, J, extras); idx (m,) indices of active rows,
+          z (m, nz), r (m, nz) residuals, J (m, nz, nz) Jacobians (None when ``jacobian`` is
+          False), extras a dict of (m, ...) arrays computed along with the residual
     z0 : (n, nz) initial guess (not modified)
     scale : (n, nz) positive scale of each unknown
     tol : converged when max |δ|/scale ≤ tol
@@ -43,28 +59,65 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=30):
 
     Returns
     -------
-    z : (n, nz) solution, converged : (n,) bool, iterations : (n,) int
+    z : (n, nz) solution: the last iterate at which the residual was evaluated, whose
+        Newton update was below tolerance
+    converged : (n,) bool, iterations : (n,) int
+    extras : dict of (n, ...) arrays, ``fun``'s extras at that iterate
     """
     z = z0.copy()
-    n = z.shape[0]
+    n, nz = z.shape
     converged = np.zeros(n, dtype=bool)
-    failed = np.zeros(n, dtype=bool)
     iterations = np.zeros(n, dtype=np.int64)
     previous = np.full(n, np.inf)
+    stale = np.ones(n, dtype=bool)           # needs a fresh Jacobian
+    Jinv = np.empty((n, nz, nz)) if n else None
+    z_eval = z.copy()
+    extras = {}
+
+    def keep(rows, ex):
+        for key, val in ex.items():
+            if key not in extras:
+                extras[key] = np.full((n,) + val.shape[1:], np.nan)
+            extras[key][rows] = val
     active = np.arange(n)
     for _ in range(maxiter):
         if active.size == 0:
             break
-        r, J = fun(active, z[active])
-        delta = solve_batched(J, -r)
-        z[active] += delta
-        iterations[active] += 1
-        size = np.max(np.abs(delta) / scale[active], axis=1)
-        bad = ~np.isfinite(size) | ~np.all(np.isfinite(z[active]), axis=1)
-        done = (size <= tol) | ((size <= stall) & (size > 0.5 * previous[active]))
+        everyone = active.size == n          # plain views instead of gathers while all iterate
+        sel = slice(None) if everyone else active
+        za = z[sel]
+        fresh = stale[sel]
+        z_eval[sel] = za
+        if fresh.all():
+            r, J, ex = fun(active, za, True)
+            keep(sel, ex)
+            if everyone:
+                Jinv = invert_batched(J)
+            else:
+                Jinv[active] = invert_batched(J)
+        else:
+            r = np.empty_like(za)
+            if fresh.any():
+                r[fresh], J, ex = fun(active[fresh], za[fresh], True)
+                keep(active[fresh], ex)
+                Jinv[active[fresh]] = invert_batched(J)
+            r[~fresh], _, ex = fun(active[~fresh], za[~fresh], False)
+            keep(active[~fresh], ex)
+        delta = -apply_batched(Jinv[sel], r)
+        za = za + delta
+        z[sel] = za
+        iterations[sel] += 1
+        size = np.max(np.abs(delta) / scale[sel], axis=1)
+        prev = previous[sel]
+        bad = ~np.isfinite(size) | ~np.all(np.isfinite(za), axis=1)
+        with np.errstate(invalid="ignore"):
+            theta = np.where(np.isfinite(prev), size / prev, np.inf)   # contraction; unknown at first
+        # converged: the update is below tol, or a round-off floor is reached.  (Stopping on the
+        # error predicted from the contraction, θ/(1 − θ)·|δ|, left constraint errors of 1e-12.)
+        done = (size <= tol) | ((size <= stall) & np.isfinite(theta) & (theta > 0.5))
         done &= ~bad
-        previous[active] = size
+        stale[sel] = np.isfinite(theta) & (theta > refresh)
+        previous[sel] = size
         converged[active[done]] = True
-        failed[active[bad]] = True
         active = active[~(done | bad)]
-    return z, converged, iterations
+    return z_eval, converged, iterations, extras

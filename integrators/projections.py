@@ -36,6 +36,28 @@ from .newton import EPS, newton
 PROJECTIONS = ("none", "standard", "symmetric", "symplectic", "midpoint")
 
 
+def _lagrange_matrix(nodes, targets):
+    """E with E_ij = ℓ_j(targets_i) for the Lagrange basis on ``nodes``."""
+    E = np.ones((len(targets), len(nodes)))
+    for i, x in enumerate(targets):
+        for j, xj in enumerate(nodes):
+            for k, xk in enumerate(nodes):
+                if k != j:
+                    E[i, j] *= (x - xk) / (xj - xk)
+    return E
+
+
+def _apply_rows(E, Y):
+    """Σ_j E_ij Y[:, j]: E (s, m), Y (n, m, d) -> (n, s, d); explicit loop (batch-independent bits)."""
+    out = np.empty((Y.shape[0], E.shape[0], Y.shape[2]))
+    for i in range(E.shape[0]):
+        acc = E[i, 0] * Y[:, 0]
+        for j in range(1, E.shape[1]):
+            acc = acc + E[i, j] * Y[:, j]
+        out[:, i] = acc
+    return out
+
+
 class StepResult:
     """Outcome of one step for n points (all arrays have a leading points axis)."""
 
@@ -61,15 +83,11 @@ class Stepper:
         s, d = tableau.s, system.d
         self.s, self.d = s, d
         self.nz = (s + (1 if self.coupled else 0) + (1 if self.lobatto else 0)) * d
-        c = tableau.c
-        # Lagrange extrapolation of last step's stage values to the next step's nodes
-        E = np.ones((s, s))
-        for i in range(s):
-            for j in range(s):
-                for k in range(s):
-                    if k != j:
-                        E[i, j] *= (1.0 + c[i] - c[k]) / (c[j] - c[k])
-        self.extrapolation = E
+        # Lagrange extrapolation of the last step's stage values (nodes c_j − 1) to the next
+        # step's nodes c_i.  (Extrapolating from two steps, degree 2s − 1, was tried: it gains
+        # nothing for s ≥ 2, whose stage values carry an O(h^{s+1}) error of their own, and
+        # its amplification wrecks the guess for SRK3.)
+        self.extrapolation = _lagrange_matrix(tableau.c - 1.0, tableau.c)
 
     # -- initial guesses --------------------------------------------------------
     def first_guess(self, q):
@@ -83,15 +101,8 @@ class Stepper:
         return np.repeat((self.h * v)[:, None, :], self.s, axis=1)
 
     def extrapolate(self, Y):
-        """Next step's stage guess from this step's stages: (n, s, d)."""
-        E = self.extrapolation
-        out = np.empty_like(Y)
-        for i in range(self.s):
-            acc = E[i, 0] * Y[:, 0]
-            for j in range(1, self.s):
-                acc = acc + E[i, j] * Y[:, j]
-            out[:, i] = acc
-        return out
+        """Next step's stage guess from the last step's stage displacements Y (n, s, d)."""
+        return _apply_rows(self.extrapolation, Y)
 
     # -- the step -------------------------------------------------------------
     def equations(self, q, p, Lam):
@@ -124,11 +135,10 @@ class Stepper:
             mu = z[:, iM:iM + d] if self.lobatto else None
             return Y, L, mu
 
-        def fun(idx, z):
+        def fun(idx, z, jacobian=True):
             Y, L, mu = unpack(z)
             m = z.shape[0]
             q0, pb = qbar[idx], pbar[idx]
-            Sx = None
             if self.coupled:
                 q0 = q0 + L
                 sumbY = vprk.weigh(tab.b, tab.b_lo, Y)
@@ -137,11 +147,28 @@ class Stepper:
                 else:  # midpoint: ϑ_q at the unprojected midpoint
                     M = q0 + 0.5 * sumbY
                     Tx = sysm.dtheta(M)
-                    Sx = vprk.contract_first(sysm.ddtheta(M), L)
                 pb = pb + vprk.transpose_apply(Tx, L)
-            st = vprk.Stages(sysm, tab, h, q0, Y)
-            R = vprk.stage_residual(tab, st, pb, mu)
+            st = vprk.Stages(sysm, tab, h, q0, Y, jacobian=jacobian)
+            res = [vprk.stage_residual(tab, st, pb, mu).reshape(m, sd)]
+            sumbG = vprk.weigh(tab.b, tab.b_lo, st.G)
+            if self.coupled:
+                q1 = q0 + sumbY + sig * L
+                T1 = sysm.dtheta(q1)
+                Tp = T1 if proj == "symmetric" else Tx
+                p1 = pb + sumbG + sig * vprk.transpose_apply(Tp, L)
+                res.append(p1 - sysm.theta(q1))
+                # what the step needs at this iterate: q increment (perturbation, Ψ_h, projection), p_{n+1}
+                extras = {"inc_q": (L + sumbY) + sig * L, "p": p1}
+            else:
+                extras = {"sumbY": vprk.weigh(tab.b, tab.b_lo, Y), "sumbG": sumbG}
+            if self.lobatto:
+                res.append(vprk.weigh(tab.d, np.zeros_like(tab.d), Y))
+            r = np.concatenate(res, axis=1)
+            if not jacobian:
+                return r, None, extras
+
             J = np.zeros((m, self.nz, self.nz), dtype=z.dtype)
+            Sx = vprk.contract_first(sysm.ddtheta(M), L) if proj == "midpoint" else None
             blocks = vprk.stage_jacobian_blocks(tab, st)
             for i in range(s):
                 for j in range(s):
@@ -149,23 +176,17 @@ class Stepper:
                     if Sx is not None:
                         B = B - (0.5 * tab.b[j]) * Sx
                     J[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = B
-            res = [R.reshape(m, sd)]
             if self.coupled:
                 TxT = np.swapaxes(Tx, -1, -2)
                 dpb_dL = TxT if Sx is None else TxT + Sx
                 shift = vprk.stage_jacobian_shift(tab, st)
                 for i in range(s):
                     J[:, i * d:(i + 1) * d, iL:iL + d] = shift[i] - dpb_dL
-                q1 = q0 + sumbY + sig * L
-                sumbG = vprk.weigh(tab.b, tab.b_lo, st.G)
-                T1 = sysm.dtheta(q1)
                 if proj == "symmetric":
                     S1 = vprk.contract_first(sysm.ddtheta(q1), L)
-                    p1 = pb + sumbG + sig * vprk.transpose_apply(T1, L)
                     dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (1.0 + sig) * S1
                     extra_Y = sig * S1
                 else:
-                    p1 = pb + sumbG + sig * vprk.transpose_apply(Tx, L)
                     dp1_dL = (1.0 + sig) * dpb_dL
                     extra_Y = (0.5 * (1.0 + sig)) * Sx
                 ThetaT = np.swapaxes(st.Theta, -1, -2)
@@ -178,13 +199,11 @@ class Stepper:
                     dp1 = KB + tab.b[j] * ThetaT[:, j] + tab.b[j] * extra_Y
                     J[:, rows, j * d:(j + 1) * d] = dp1 - tab.b[j] * T1
                 J[:, rows, iL:iL + d] = dp1_dL + KS - (1.0 + sig) * T1
-                res.append(p1 - sysm.theta(q1))
             if self.lobatto:
                 for i in range(s):
                     J[:, i * d:(i + 1) * d, iM:iM + d] = (tab.d[i] / tab.b[i]) * np.eye(d)
                     J[:, iM:iM + d, i * d:(i + 1) * d] = tab.d[i] * np.eye(d)
-                res.append(vprk.weigh(tab.d, np.zeros_like(tab.d), Y))
-            return np.concatenate(res, axis=1), J
+            return r, J, extras
 
         return fun, unpack, qbar, pbar, Theta_q
 
@@ -218,37 +237,28 @@ class Stepper:
             z0[:, iL:iL + d] = Lam
         if self.lobatto:
             z0[:, iM:iM + d] = mu0
-        qscale = np.maximum(np.max(np.abs(q), axis=1), 1.0)
-        pscale = np.maximum(np.max(np.abs(pbar), axis=1), 1.0)
-        scale = np.repeat(qscale[:, None], self.nz, axis=1)
+        # every unknown is measured relative to its own coordinate's size (at least 1)
+        qscale = np.maximum(np.abs(q), 1.0)
+        scale = np.tile(qscale, self.nz // d)
         if self.lobatto:
-            scale[:, iM:iM + d] = pscale[:, None]
-        z, ok, its = newton(fun, z0, scale)
+            scale[:, iM:iM + d] = np.maximum(np.abs(pbar), 1.0)
+        scale = np.where(np.isfinite(scale), scale, 1.0)
+        # the solution is the last iterate at which the residual was evaluated (its update was
+        # below tolerance), so the step's outputs come from that evaluation, not a new one
+        z, ok, its, ex = newton(fun, z0, scale)
         Y, L, mu = unpack(z)
-
-        # unprojected end point of this step (eq:vprk_3), evaluated once more at the solution
-        q0 = qbar + L if self.coupled else qbar
-        st = vprk.Stages(sysm, tab, h, q0, Y, jacobian=False)
-        sumbY = vprk.weigh(tab.b, tab.b_lo, Y)
-        sumbG = vprk.weigh(tab.b, tab.b_lo, st.G)
         out = StepResult()
         out.Y, out.mu, out.iterations = Y, mu, its
         if proj == "none":
-            out.inc_q, out.inc_p, out.p, out.Lam = sumbY, sumbG, None, np.zeros_like(q)
+            out.inc_q, out.inc_p, out.p, out.Lam = ex["sumbY"], ex["sumbG"], None, np.zeros_like(q)
         elif self.coupled:
-            pb = pbar + vprk.transpose_apply(Theta_q if proj == "symmetric" else sysm.dtheta(q0 + 0.5 * sumbY), L)
-            q1 = q0 + sumbY + sig * L
-            Tx = sysm.dtheta(q1) if proj == "symmetric" else sysm.dtheta(q0 + 0.5 * sumbY)
-            out.p = pb + sumbG + sig * vprk.transpose_apply(Tx, L)
-            out.inc_q = (L + sumbY) + sig * L
-            out.inc_p, out.Lam = None, L
-        else:  # standard / symplectic: the projection is a separate solve
-            qb, pb = qbar + sumbY, pbar + sumbG
-            L1, ok1, its1 = self._post_projection(qb, pb, Lam)
+            out.inc_q, out.p, out.inc_p, out.Lam = ex["inc_q"], ex["p"], None, L
+        else:  # standard / symplectic: the projection is a separate solve (eq:vprk_3, then the projection)
+            sumbY = ex["sumbY"]
+            L1, ok1, its1, ex1 = self._post_projection(qbar + sumbY, pbar + ex["sumbG"], Lam)
             ok &= ok1
             out.iterations = its + its1
-            T1 = sysm.dtheta(qb + sig * L1)
-            out.p = pb + sig * vprk.transpose_apply(T1, L1)
+            out.p = ex1["p"]
             out.inc_q = (sumbY + sig * L1) if proj == "standard" else ((Lam + sumbY) + sig * L1)
             out.inc_p, out.Lam = None, L1
         out.ok = ok
@@ -258,14 +268,16 @@ class Stepper:
         """Solve ϑ(q̄ + σΛ) = p̄ + σ ϑ_q(q̄ + σΛ)ᵀΛ for Λ (eq:orthogonal_projection, eq:symplectic_projection_post)."""
         sysm, sig = self.system, self.sigma
 
-        def fun(idx, L):
+        def fun(idx, L, jacobian=True):
             q1 = qb[idx] + sig * L
             T1 = sysm.dtheta(q1)
+            p1 = pb[idx] + sig * vprk.transpose_apply(T1, L)
+            r = p1 - sysm.theta(q1)
+            if not jacobian:
+                return r, None, {"p": p1}
             S1 = vprk.contract_first(sysm.ddtheta(q1), L)
-            r = pb[idx] + sig * vprk.transpose_apply(T1, L) - sysm.theta(q1)
-            J = sig * (np.swapaxes(T1, -1, -2) - T1) + sig * sig * S1
-            return r, J
+            return r, sig * (np.swapaxes(T1, -1, -2) - T1) + sig * sig * S1, {"p": p1}
 
-        scale = np.repeat(np.maximum(np.max(np.abs(qb), axis=1), 1.0)[:, None], self.d, axis=1)
+        scale = np.maximum(np.abs(qb), 1.0)
         scale = np.where(np.isfinite(scale), scale, 1.0)
         return newton(fun, guess, scale)

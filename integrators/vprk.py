@@ -10,9 +10,10 @@ Y_i = h V_i (same units as q, so one tolerance fits all unknowns):
     q̄' = q̄ + Σ_i b_i Y_i,   p̄' = p̄ + Σ_i b_i G_i              (eq:vprk_3)
 
 Sums over stages use the double + correction coefficients of the tableau.  All
-arrays carry a leading points axis; every contraction is an explicit loop over
-the (small) stage and coordinate indices with elementwise numpy operations, so a
-point's arithmetic never depends on which other points share its batch.
+arrays carry a leading points axis; contractions over the (small) stage index are
+explicit loops with elementwise numpy operations and contractions over coordinates
+are stacked matmuls, one small product per point, so a point's arithmetic never
+depends on which other points share its batch.
 """
 from __future__ import annotations
 
@@ -48,30 +49,19 @@ def weigh(w, w_lo, X):
 
 
 def transpose_apply(T, v):
-    """(Tᵀ v)_m = Σ_l T[..., l, m] v[..., l]: T (..., d, d), v (..., d)."""
-    d = v.shape[-1]
-    acc = T[..., 0, :] * v[..., 0, None]
-    for l in range(1, d):
-        acc = acc + T[..., l, :] * v[..., l, None]
-    return acc
+    """(Tᵀ v)_m = Σ_l T[..., l, m] v[..., l]: T (..., d, d), v (..., d).
+
+    Stacked matmul treats every point's matrix on its own, so the bits of a point never
+    depend on its batch (checked bitwise in tests/test_integrate.py).
+    """
+    return np.matmul(v[..., None, :], T)[..., 0, :]
 
 
 def contract_first(T3, v):
     """Σ_l T3[..., l, :, :] v[..., l]: T3 (..., d, d, d), v (..., d) -> (..., d, d)."""
     d = v.shape[-1]
-    acc = T3[..., 0, :, :] * v[..., 0, None, None]
-    for l in range(1, d):
-        acc = acc + T3[..., l, :, :] * v[..., l, None, None]
-    return acc
-
-
-def apply(M, v):
-    """(M v)_i = Σ_j M[..., i, j] v[..., j]."""
-    d = v.shape[-1]
-    acc = M[..., :, 0] * v[..., 0, None]
-    for j in range(1, d):
-        acc = acc + M[..., :, j] * v[..., j, None]
-    return acc
+    flat = T3.reshape(T3.shape[:-2] + (d * d,))
+    return np.matmul(v[..., None, :], flat)[..., 0, :].reshape(T3.shape[:-3] + (d, d))
 
 
 class Stages:

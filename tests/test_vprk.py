@@ -22,7 +22,7 @@ def test_jacobian_matches_complex_step(sysname, h, tab, proj, rng):
     z = 1e-2 * rng.standard_normal((n, st.nz))
     z[:, : st.s * sy.d] += np.repeat(h * sy.vector_field(q), st.s, axis=0).reshape(n, -1)
     idx = np.arange(n)
-    _, J = fun(idx, z)
+    _, J, _ = fun(idx, z)
     eps = 1e-30
     for k in range(st.nz):
         zc = z.astype(complex)
@@ -71,8 +71,12 @@ def test_unprojected_gauss_drifts_off_the_constraint_on_lotka_volterra():
     assert late > 5 * early > 1e-4
 
 
-def test_newton_converges_quadratically():
+def test_newton_iterations_per_step():
+    """One exact Jacobian per step, reused: about five residual evaluations per step (h = 10).
+
+    (Scaling the Jacobian by 1.1 raises this to 13 iterations, so the bound catches a wrong Jacobian.)
+    """
     sy = integrators.system("guiding_centre_symmetric")
     q0 = np.array(sy.defaults["q0"])
     sol = integrators.integrate(sy, q0, tableau="GLRK2", projection="symmetric", h=10, steps=50)
-    assert sol.mean_newton_iterations <= 4.5
+    assert sol.mean_newton_iterations <= 5.5
