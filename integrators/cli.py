@@ -1,53 +1,64 @@
-"""The `poincare` command line.
+"""The `poincare` command line: run | scenes | plot | list.
 
-Until the scene driver lands, ``poincare run`` advances a loop of points of a
-built-in system with chosen (tableau, projection) pairs and prints the energy,
-momentum and constraint errors.  Bad input exits non-zero with one line.
+    poincare run [SCENE] [-o OUT] [--resume] [--force]     (mpiexec -n K poincare run … to distribute)
+    poincare scenes
+    poincare plot OUT.h5 [-o DIR]
+    poincare list tableaus|systems
+
+Bad input exits with status 2 and one line on stderr naming the problem.
 """
 from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 import numpy as np
 
 
-def _demo_loop(system, n):
-    """A loop of n points around the system's default initial point (small ellipse in q¹, q²)."""
-    q0 = np.array(system.defaults["q0"], dtype=float)
-    tau = np.arange(n) / n
-    pts = np.repeat(q0[None], n, axis=0)
-    pts[:, 0] += 0.05 * np.cos(2 * np.pi * tau)
-    pts[:, 1] += 0.05 * np.sin(2 * np.pi * tau)
-    return pts
+def _print_summary(summaries, out):
+    keys = sorted({k for s in summaries for k in s.max_errors})
+    head = f"{'pair':22s} {'status':8s} {'broke':>5s} " + " ".join(f"{k:>17s}" for k in keys) + f" {'wall [s]':>9s}"
+    print(f"\nwrote {out}\nmax relative invariant error |I(t) − I(0)|/|I(0)|:")
+    print(head)
+    for s in summaries:
+        errs = " ".join(f"{s.max_errors.get(k, np.nan):17.3e}" for k in keys)
+        print(f"{s.pair:22s} {s.status:8s} {s.breakdowns:5d} {errs} {s.wall_time:9.1f}")
 
 
 def cmd_run(args) -> int:
-    import integrators
-    system = integrators.system(args.system)
-    h = args.h if args.h is not None else system.defaults["h"]
-    for tab in args.tableau:                 # validate everything before any output
-        integrators.tableau(tab)
-    if args.points < 1 or args.steps < 1:
-        raise ValueError("--points and --steps must be positive")
-    q = _demo_loop(system, args.points)
-    print(f"{system}  points={args.points}  h={h:g}  steps={args.steps}")
-    print(f"{'pair':24s} {'status':8s} {'max|ΔH/H|':>11s} {'max|ΔP|':>11s} {'max|p−ϑ(q)|':>12s} {'newton/step':>11s} {'wall [s]':>9s}")
-    for tab in args.tableau:
-        for proj in args.projection:
-            t0 = time.perf_counter()
-            sol = integrators.integrate(system, q, tableau=tab, projection=proj, h=h, steps=args.steps,
-                                        save_every=max(1, args.steps // 100))
-            wall = time.perf_counter() - t0
-            qs = sol.q
-            H = system.H(qs)
-            dH = np.nanmax(np.abs((H - H[0]) / H[0]))
-            dP = np.nanmax(np.abs(system.momentum(qs) - system.momentum(qs[0]))) if system.has_momentum else np.nan
-            con = np.nanmax(np.abs(sol.p - system.theta(qs)))
-            broke = int(np.isfinite(sol.breakdown_time).sum())
-            status = "ok" if broke == 0 else f"{broke} broke"
-            print(f"{tab + '-' + proj:24s} {status:8s} {dH:11.3e} {dP:11.3e} {con:12.3e} {sol.mean_newton_iterations:11.2f} {wall:9.2f}")
+    from . import __version__
+    from .driver import communicator, run
+    from .scene import load_scene
+    comm = communicator()
+    scene = load_scene(args.scene)
+    out = args.output or scene.output
+    if comm.rank == 0:
+        npts = (scene.loop["points"] if scene.loop else 0) + (
+            scene.surface["n_sigma"] * scene.surface["n_tau"] if scene.surface else 0)
+        print(f"scene '{scene.name}': {scene.system_name}, {npts} points, {len(scene.pairs)} pairs, "
+              f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
+              f"{comm.size} rank{'s' if comm.size > 1 else ''}", flush=True)
+    summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
+                    progress=False if args.quiet else None, version=__version__)
+    if comm.rank == 0:
+        _print_summary(summaries, out)
+    return 0
+
+
+def cmd_scenes(args) -> int:
+    from .scene import builtin_scenes, load_scene
+    for name, path in builtin_scenes().items():
+        s = load_scene(name)
+        npts = (s.loop["points"] if s.loop else 0) + (s.surface["n_sigma"] * s.surface["n_tau"] if s.surface else 0)
+        print(f"{name:24s} {s.system_name:26s} {npts:6d} points  {len(s.pairs):2d} pairs  h = {s.h:<5g} "
+              f"steps = {s.steps:<5d} {path}")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from .plots import plot_file
+    for path in plot_file(args.file, args.output):
+        print(path)
     return 0
 
 
@@ -63,17 +74,24 @@ def cmd_list(args) -> int:
 
 
 def build_parser():
-    import integrators
-    ap = argparse.ArgumentParser(prog="poincare", description="Poincaré integral invariant diagnostics of projected variational integrators.")
+    ap = argparse.ArgumentParser(prog="poincare",
+                                 description="Poincaré integral invariant diagnostics of projected variational integrators.")
     sub = ap.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="advance a loop of points and report conserved-quantity errors")
-    run.add_argument("--system", default="guiding_centre_symmetric", choices=integrators.SYSTEM_NAMES)
-    run.add_argument("--tableau", nargs="+", default=["GLRK1", "GLRK2", "SRK3"])
-    run.add_argument("--projection", nargs="+", default=list(integrators.PROJECTIONS), choices=integrators.PROJECTIONS)
-    run.add_argument("--points", type=int, default=200)
-    run.add_argument("--steps", type=int, default=200)
-    run.add_argument("--h", type=float, default=None)
+    run = sub.add_parser("run", help="run a scene (a built-in name or a TOML file; default: the 'default' scene)",
+                         description="Run every (tableau, projection) pair of a scene and write one HDF5 file. "
+                                     "Distribute with: mpiexec -n K poincare run SCENE")
+    run.add_argument("scene", nargs="?", default=None, help="built-in scene name or path to a TOML scene")
+    run.add_argument("-o", "--output", help="HDF5 output path (default: the scene's output.path)")
+    run.add_argument("--resume", action="store_true", help="continue an interrupted run of the same scene")
+    run.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=cmd_run)
+    sc = sub.add_parser("scenes", help="list the built-in scenes")
+    sc.set_defaults(func=cmd_scenes)
+    pl = sub.add_parser("plot", help="PNG plots of a run file")
+    pl.add_argument("file", help="HDF5 file written by 'poincare run'")
+    pl.add_argument("-o", "--output", default=None, help="directory for the PNGs (default: next to the file)")
+    pl.set_defaults(func=cmd_plot)
     ls = sub.add_parser("list", help="list built-in tableaus or systems")
     ls.add_argument("what", choices=["tableaus", "systems"])
     ls.set_defaults(func=cmd_list)
@@ -84,11 +102,12 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:
         print(f"poincare: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("poincare: interrupted", file=sys.stderr)
+        print("poincare: interrupted (the output file is readable up to its last output; use --resume)",
+              file=sys.stderr)
         return 130
 
 

@@ -1,0 +1,313 @@
+"""The batch-run driver: every (tableau, projection) pair of a scene, distributed over MPI ranks.
+
+The sample points (loop first, then the surface row by row) are split into contiguous
+blocks, one per rank.  Each rank advances its block with each pair; at every output
+time rank 0 gathers the points, computes the invariants and diagnostics and appends
+one row to the HDF5 file (see :mod:`integrators.output`), plus a checkpoint of the
+full integrator state.  Because a point's trajectory does not depend on its batch,
+the file's numbers are bitwise the same for any number of ranks.  Without mpiexec
+(or without mpi4py) it runs as a single process.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import output
+from .integrate import State, advance
+from .projections import Stepper
+from .tableaus import tableau as builtin_tableau
+
+
+class _Serial:
+    """The part of an MPI communicator the driver uses, for one process."""
+
+    rank, size = 0, 1
+
+    def gather(self, obj, root=0):
+        return [obj]
+
+    def bcast(self, obj, root=0):
+        return obj
+
+    def Barrier(self):
+        pass
+
+
+def communicator():
+    """MPI.COMM_WORLD when running under mpiexec with more than one rank, else a serial stand-in."""
+    if not any(k in os.environ for k in ("PMI_RANK", "PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "HYDRA_CONTROL_FD",
+                                         "PMI_FD", "MPI_LOCALNRANKS")):
+        return _Serial()
+    try:
+        from mpi4py import MPI
+    except ImportError:
+        return _Serial()
+    comm = MPI.COMM_WORLD
+    return comm if comm.Get_size() > 1 else _Serial()
+
+
+@dataclasses.dataclass
+class PairSummary:
+    pair: str
+    status: str
+    breakdowns: int
+    max_errors: dict
+    wall_time: float
+
+
+class Progress:
+    """A one-line progress bar with ETA on stderr (rank 0 only; silent when not a terminal unless forced)."""
+
+    def __init__(self, total, enabled):
+        self.total, self.done, self.enabled = total, 0, enabled
+        self.start = time.perf_counter()
+        self.last = 0.0
+
+    def update(self, n, label):
+        self.done += n
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < 0.2 and self.done < self.total:
+            return
+        self.last = now
+        frac = self.done / self.total
+        eta = (now - self.start) * (1 - frac) / frac if frac > 0 else float("nan")
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f}%  {label:<22s} ETA {eta:6.0f} s ")
+        if self.done >= self.total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _split(n, size):
+    bounds = np.linspace(0, n, size + 1).round().astype(int)
+    return [(int(bounds[k]), int(bounds[k + 1])) for k in range(size)]
+
+
+def _state_dict(st: State):
+    return {name: getattr(st, name) for name in output.STATE_FIELDS}
+
+
+def _state_from(d, lo, hi, h, s):
+    st = State(d["q"][lo:hi], d["p"][lo:hi], d["Lam"][lo:hi] / h, h, s)
+    for name in output.STATE_FIELDS:
+        setattr(st, name, np.array(d[name][lo:hi]))
+    return st
+
+
+def _concat(parts):
+    return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+
+
+class Diagnostics:
+    """Invariants and conserved-quantity errors of the gathered points at one output time (rank 0)."""
+
+    def __init__(self, scene, system, q0):
+        import invariants  # noqa: F401  (imported here: rank 0 only needs it)
+        self.scene, self.system = scene, system
+        self.n_loop = scene.loop["points"] if scene.loop else 0
+        self.surf_shape = (scene.surface["n_sigma"], scene.surface["n_tau"]) if scene.surface else None
+        self.H0 = system.H(q0)
+        self.P0 = system.momentum(q0) if "momentum" in scene.diagnostics else None
+
+    def row(self, t, q, p, lam, live):
+        import invariants
+        sc, sy = self.scene, self.system
+        row = {"t": t}
+        loop = slice(0, self.n_loop)
+        surf = slice(self.n_loop, None)
+        with np.errstate(all="ignore"):
+            if self.n_loop:
+                ql, pl, ll = q[loop], p[loop], lam[loop]
+                res = 0.0
+                for form in sc.forms:
+                    try:
+                        v = invariants.first_invariant(ql, form, system=sy, p=pl, lam=ll, h=sc.h)
+                        row[f"I1/{form}"], res = v.value, max(res, v.resolution)
+                    except ValueError:          # non-finite points after a breakdown
+                        row[f"I1/{form}"], res = np.nan, np.nan
+                row["resolution/I1"] = res
+            if self.surf_shape:
+                shp = self.surf_shape + (sy.d,)
+                qs, ps, ls = (a[surf].reshape(shp) for a in (q, p, lam))
+                res = 0.0
+                for form in sc.forms:
+                    try:
+                        v = invariants.second_invariant(qs, form, system=sy, p=ps, lam=ls, h=sc.h)
+                        row[f"I2/{form}"], res = v.value, max(res, v.resolution)
+                    except ValueError:
+                        row[f"I2/{form}"], res = np.nan, np.nan
+                row["resolution/I2"] = res
+            if "energy" in sc.diagnostics:
+                row["energy_error"] = float(np.max(np.abs((sy.H(q) - self.H0) / self.H0)[live], initial=0.0))
+            if "momentum" in sc.diagnostics:
+                row["momentum_error"] = float(np.max(np.abs(sy.momentum(q) - self.P0)[live], initial=0.0))
+            if "constraint" in sc.diagnostics:
+                row["constraint_error"] = float(np.max(np.abs(p - sy.theta(q))[live], initial=0.0))
+        return row
+
+
+def run(scene, path, *, resume=False, force=False, comm=None, progress=None, version="0", after_output=None):
+    """Run every pair of ``scene`` and write ``path``; returns a list of PairSummary (rank 0) or None.
+
+    after_output : optional callback(pair, step) on rank 0 after each flushed output (tests use it).
+    """
+    comm = comm or communicator()
+    rank, size = comm.rank, comm.size
+    path = Path(path)
+    error = None
+    if rank == 0:
+        if path.exists() and not (resume or force):
+            error = f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
+        elif resume and not path.exists():
+            error = f"cannot resume: '{path}' does not exist"
+    error = comm.bcast(error, root=0)
+    if error:
+        raise ValueError(error)
+
+    system = scene.system()
+    pts = [a.reshape(-1, system.d) for a in (scene.loop_points(), scene.surface_points()) if a is not None]
+    q0 = np.concatenate(pts)
+    n = q0.shape[0]
+    lo, hi = _split(n, size)[rank]
+    h = scene.h
+    n_out = scene.n_outputs
+
+    f = None
+    diagnostics = None
+    if rank == 0:
+        diagnostics = Diagnostics(scene, system, q0)
+        max_s = max(builtin_tableau(t).s for t in scene.tableaus)
+        if resume:
+            f = output.open_for_resume(path, scene)
+        else:
+            f = None
+    # checkpoint shapes depend on the tableau's s: one layout per scene, sized for the largest s
+    summaries = []
+    todo = []
+    if rank == 0:
+        if not resume:
+            shapes = _state_shapes(n, system.d, max_s)
+            f = output.create(path, scene, version, n, shapes)
+        for tab, proj in scene.pairs:
+            g = f["runs"][output.pair_name(tab, proj)]
+            if g.attrs["status"] in ("ok", "partial", "failed"):
+                todo.append(None)
+                continue
+            step, state = output.read_checkpoint(g)
+            if step is None:
+                output.truncate(g, 0)
+                todo.append((0, None))
+            else:
+                output.truncate(g, step // scene.output_every + 1)
+                todo.append((step, state))
+        f.flush()
+    todo = comm.bcast(todo if rank == 0 else None, root=0)
+
+    steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
+    bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
+    for (tab_name, proj), job in zip(scene.pairs, todo):
+        name = output.pair_name(tab_name, proj)
+        if job is None:
+            continue
+        start_step, saved = job
+        tab = builtin_tableau(tab_name)
+        stepper = Stepper(system, tab, proj, h)
+        if saved is None:
+            st = State(q0[lo:hi], system.theta(q0[lo:hi]), np.zeros((hi - lo, system.d)), h, tab.s)
+        else:
+            saved = comm.bcast(saved if rank == 0 else None, root=0)
+            st = _state_from(_unpad(saved, tab.s), lo, hi, h, tab.s)
+        g = f["runs"][name] if rank == 0 else None
+        wall0 = float(g["wall_clock"][0]) if rank == 0 else 0.0
+        t_start = time.perf_counter()
+        if start_step == 0:
+            _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name)
+        for step in range(start_step + 1, scene.steps + 1):
+            advance(stepper, st, step * h)
+            if step % scene.output_every == 0:
+                if rank == 0:
+                    g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
+                _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name)
+            if rank == 0:
+                bar.update(1, name)
+        if rank == 0:
+            g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
+            f.flush()
+    comm.Barrier()
+    if rank != 0:
+        return None
+    f.close()
+    return finalize(path, scene)
+
+
+def _state_shapes(n, d, s):
+    return {"q": ((n, d), "f8"), "p": ((n, d), "f8"), "Lam": ((n, d), "f8"), "q_comp": ((n, d), "f8"),
+            "p_comp": ((n, d), "f8"), "Y": ((n, s, d), "f8"), "mu": ((n, d), "f8"),
+            "have_history": ((n,), "?"), "live": ((n,), "?"), "breakdown_time": ((n,), "f8"),
+            "iterations": ((n,), "i8"), "steps": ((n,), "i8")}
+
+
+def _pad(state, s_max):
+    """Stage arrays padded to the file's largest s."""
+    Y = state["Y"]
+    if Y.shape[1] < s_max:
+        pad = np.zeros((Y.shape[0], s_max - Y.shape[1], Y.shape[2]))
+        state = dict(state, Y=np.concatenate([Y, pad], axis=1))
+    return state
+
+
+def _unpad(state, s):
+    return dict(state, Y=state["Y"][:, :s])
+
+
+def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name):
+    parts = comm.gather(_state_dict(st), root=0)
+    if comm.rank != 0:
+        return
+    full = _concat(parts)
+    q, p, lam, live = full["q"], full["p"], full["Lam"] / h, full["live"]
+    row = diagnostics.row(step * h, q, p, lam, live)
+    if scene.store_points:
+        nl = diagnostics.n_loop
+        if scene.loop is not None:
+            row["points/loop"] = q[:nl]
+        if scene.surface is not None:
+            row["points/surface"] = q[nl:].reshape(diagnostics.surf_shape + (q.shape[1],))
+    output.append(g, row)
+    g["breakdown_time"][...] = full["breakdown_time"]
+    output.write_checkpoint(f, g, step, _pad(full, g["checkpoint/a/Y"].shape[1]))
+    if after_output is not None:
+        after_output(name, step)
+
+
+def finalize(path, scene):
+    """Set each pair's status and wall_time attributes and summarise."""
+    import h5py
+    summaries = []
+    with h5py.File(path, "r+") as f:
+        for tab, proj in scene.pairs:
+            name = output.pair_name(tab, proj)
+            g = f["runs"][name]
+            bt = g["breakdown_time"][...]
+            broke = int(np.isfinite(bt).sum())
+            complete = g["t"].shape[0] == scene.n_outputs
+            status = ("failed" if broke == bt.size else "partial" if broke else "ok") if complete else "pending"
+            g.attrs["status"] = status
+            g.attrs["wall_time"] = float(g["wall_clock"][0])
+            errs = {}
+            for inv in ("I1", "I2"):
+                if inv in g:
+                    for form in g[inv]:
+                        v = g[inv][form][...]
+                        with np.errstate(all="ignore"):
+                            errs[f"{inv} {form}"] = float(np.nanmax(np.abs(v - v[0]) / abs(v[0]))) if v.size else np.nan
+            summaries.append(PairSummary(name, status, broke, errs, float(g["wall_clock"][0])))
+    return summaries
