@@ -1,0 +1,231 @@
+"""The service: scene validation, driver output, rank-count independence, kill and resume, plots, CLI."""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from integrators import driver
+from integrators.cli import main as cli_main
+from integrators.scene import SceneError, builtin_scenes, load_scene, parse_scene
+
+SMALL = """
+name = "small"
+[system]
+name = "guiding_centre_symmetric"
+[loop]
+points = 32
+[surface]
+n_sigma = 12
+n_tau = 12
+[run]
+tableaus = ["GLRK1", "GLRK2"]
+projections = ["none", "symmetric", "symplectic"]
+h = 10.0
+steps = 40
+output_every = 4
+forms = ["canonical", "noncanonical", "corrected"]
+"""
+
+
+def edit(text, old, new):
+    assert old in text
+    return text.replace(old, new)
+
+
+@pytest.mark.parametrize("change,msg", [
+    (("h = 10.0", "h = 10.0\nspeed = 3"), "unknown key 'run.speed'"),
+    (("h = 10.0", "h = '10'"), "'run.h' must be float"),
+    (("h = 10.0", "h = 0.0"), "run.h must be a finite positive"),
+    (("h = 10.0", "h = -1.0"), "run.h must be a finite positive"),
+    (("h = 10.0", "h = nan"), "run.h must be a finite positive"),
+    (("steps = 40", "steps = 0"), "run.steps must be positive"),
+    (("steps = 40", "steps = -5"), "run.steps must be positive"),
+    (('"GLRK1", "GLRK2"', '"GLRK1", "GLRK9"'), "unknown tableau 'GLRK9'"),
+    (('"none", "symmetric"', '"none", "orthogonal"'), "unknown value 'orthogonal'"),
+    (('name = "guiding_centre_symmetric"', 'name = "pendulum"'), "unknown system 'pendulum'"),
+    (('name = "guiding_centre_symmetric"', 'name = "guiding_centre_symmetric"\nparams = { nu = 1.0 }'), "unknown parameter 'nu'"),
+    (("points = 32", "points = 32\nparams = { u0 = nan }"), "not finite or outside the domain"),
+    (("points = 32", "points = 2"), "loop.points must be at least 3"),
+    (("output_every = 4", "output_every = 0"), "run.output_every"),
+    (("forms = [", "forms = ['magic', "), "unknown value 'magic'"),
+    (("[run]", "[run]\ntableaus = 3\n"), "not valid TOML"),
+])
+def test_bad_scenes_name_the_key(change, msg):
+    with pytest.raises(SceneError, match=msg):
+        parse_scene(edit(SMALL, *change))
+
+
+def test_out_of_domain_points_and_missing_sections():
+    lv = """
+[system]
+name = "lotka_volterra_2d"
+[loop]
+shape = "ellipse"
+points = 16
+params = { d = 2, center = [0.05, 1.0], radii = [0.1, 0.1] }
+[run]
+tableaus = ["GLRK2"]
+projections = ["none"]
+h = 0.1
+steps = 10
+diagnostics = ["energy"]
+"""
+    with pytest.raises(SceneError, match="outside the domain of lotka_volterra_2d"):
+        parse_scene(lv)
+    with pytest.raises(SceneError, match="needs a \\[loop\\] or a \\[surface\\]"):
+        parse_scene("[system]\nname='point_vortices'\n[run]\ntableaus=['GLRK1']\nprojections=['none']\nh=0.1\nsteps=1")
+    with pytest.raises(SceneError, match="has no Noether momentum"):
+        parse_scene(edit(lv, 'diagnostics = ["energy"]', 'diagnostics = ["momentum"]').replace("0.05", "1.0"))
+
+
+def test_every_builtin_scene_validates():
+    names = set(builtin_scenes())
+    assert {"default", "paper_poincare", "lotka_volterra", "point_vortices", "guiding_centre_tokamak"} <= names
+    for name in names:
+        load_scene(name)
+
+
+def dump(path, skip=("wall_clock",)):
+    out = {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and not any(s in name for s in skip):
+                out[name] = obj[()]
+        f.visititems(visit)
+        out["status"] = {k: f["runs"][k].attrs["status"] for k in f["runs"]}
+    return out
+
+
+def same(a, b):
+    return set(a) == set(b) and all(
+        (a[k] == b[k]) if k == "status" else np.array_equal(a[k], b[k]) for k in a)
+
+
+def test_run_writes_the_spec_layout_and_the_papers_findings(tmp_path):
+    scene = parse_scene(SMALL)
+    out = tmp_path / "small.h5"
+    summaries = driver.run(scene, out, progress=False)
+    assert [s.pair for s in summaries] == [f"{t}-{p}" for t, p in scene.pairs]
+    with h5py.File(out, "r") as f:
+        assert f.attrs["format"] == "poincare/1" and f.attrs["scene"] == SMALL
+        g = f["runs/GLRK1-symplectic"]
+        assert g["t"].shape == (11,) and g.attrs["status"] == "ok" and g.attrs["wall_time"] > 0
+        for name in ("I1/canonical", "I1/noncanonical", "I1/corrected", "I2/corrected", "resolution/I1",
+                     "resolution/I2", "energy_error", "momentum_error", "constraint_error"):
+            assert g[name].shape == (11,), name
+        assert g["breakdown_time"].shape == (32 + 144,)
+        rel = lambda v: np.max(np.abs(v - v[0]) / abs(v[0]))
+        # sec:app_integral_invariants: unprojected keeps the canonical forms, not the noncanonical ones
+        none = f["runs/GLRK1-none"]
+        assert rel(none["I1/canonical"][...]) < 1e-12 and rel(none["I1/noncanonical"][...]) > 1e-6
+        # symmetric keeps the noncanonical forms; symplectic keeps the corrected ones
+        assert rel(f["runs/GLRK1-symmetric/I1/noncanonical"][...]) < 1e-12
+        assert rel(g["I1/corrected"][...]) < 1e-12 and rel(g["I2/corrected"][...]) < 1e-12
+        assert rel(g["I1/noncanonical"][...]) > 1e-9
+    with pytest.raises(ValueError, match="exists; use --resume"):
+        driver.run(scene, out, progress=False)
+
+
+def test_no_surface_means_no_surface_data(tmp_path):
+    scene = parse_scene(edit(SMALL, "[surface]\nn_sigma = 12\nn_tau = 12\n", ""))
+    driver.run(scene, tmp_path / "loop.h5", progress=False)
+    with h5py.File(tmp_path / "loop.h5", "r") as f:
+        g = f["runs/GLRK2-none"]
+        assert "I2" not in g and "resolution/I2" not in g and "points" not in g
+        assert g["breakdown_time"].shape == (32,)
+
+
+def poincare(*args, n=None, **kw):
+    exe = shutil.which("poincare") or str(Path(sys.executable).parent / "poincare")
+    cmd = [exe, *args]
+    if n:
+        mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
+        cmd = [mpiexec, "-n", str(n), *cmd]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600, **kw)
+
+
+@pytest.mark.mpi
+def test_results_are_bitwise_identical_for_1_2_and_3_ranks(tmp_path):
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    files = []
+    for n in (None, 2, 3):
+        out = tmp_path / f"r{n or 1}.h5"
+        r = poincare("run", str(scene), "-o", str(out), "-q", n=n)
+        assert r.returncode == 0, r.stderr
+        if n:
+            assert f"{n} ranks" in r.stdout
+        files.append(dump(out))
+    assert same(files[0], files[1]) and same(files[0], files[2])
+
+
+def test_kill_and_resume_gives_the_same_bits(tmp_path):
+    scene = tmp_path / "small.toml"
+    scene.write_text(edit(SMALL, "steps = 40", "steps = 1000"))
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    assert poincare("run", str(scene), "-o", str(full), "-q").returncode == 0
+    proc = subprocess.Popen([shutil.which("poincare") or str(Path(sys.executable).parent / "poincare"),
+                             "run", str(scene), "-o", str(part), "-q"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    # wait until a few outputs of the third pair are on disk, then kill without warning
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        time.sleep(0.2)
+        try:
+            with h5py.File(part, "r", locking=False) as f:   # the writer holds HDF5's file lock
+                if f["runs/GLRK1-symplectic/t"].shape[0] >= 5:
+                    break
+        except (OSError, KeyError, RuntimeError):
+            pass
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    with h5py.File(part, "r") as f:                     # readable, complete up to its last output
+        done = f["runs/GLRK1-none"]
+        assert done["t"].shape[0] == 251 and done["I1/canonical"].shape[0] == 251
+        g = f["runs/GLRK1-symplectic"]
+        n = g["t"].shape[0]
+        assert 5 <= n < 251 and all(g[k].shape[0] == n for k in ("I1/noncanonical", "I2/corrected", "energy_error"))
+        assert np.array_equal(g["t"][...], 10.0 * 4 * np.arange(n))
+    r = poincare("run", str(scene), "-o", str(part), "-q")
+    assert r.returncode == 2 and "--resume" in r.stderr
+    r = poincare("run", str(scene), "-o", str(part), "-q", "--resume")
+    assert r.returncode == 0, r.stderr
+    assert same(dump(full, skip=("wall_clock", "checkpoint")), dump(part, skip=("wall_clock", "checkpoint")))
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["run", "no-such-scene"], "neither a file nor a built-in scene"),
+    (["plot", "missing.h5"], "does not exist"),
+    (["run", "--resume", "-o", "nothing.h5"], "cannot resume"),
+])
+def test_cli_errors_are_one_line(argv, msg, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err
+    assert msg in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_bad_scene_file_through_the_cli(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(edit(SMALL, "h = 10.0", "h = -10.0"))
+    r = poincare("run", str(bad), "-o", str(tmp_path / "x.h5"))
+    assert r.returncode == 2 and r.stderr.strip() == "poincare: error: run.h must be a finite positive number, got -10.0"
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_plots_are_written(tmp_path):
+    scene = parse_scene(edit(SMALL, "forms = [", "store_points = true\nforms = ["))
+    out = tmp_path / "p.h5"
+    driver.run(scene, out, progress=False)
+    assert cli_main(["plot", str(out), "-o", str(tmp_path / "png")]) == 0
+    names = sorted(p.name for p in (tmp_path / "png").iterdir())
+    assert names == sorted([f"p_I{k}_{f}.png" for k in (1, 2) for f in ("canonical", "corrected", "noncanonical")]
+                           + ["p_diagnostics.png", "p_points.png"])
+    assert all((tmp_path / "png" / n).stat().st_size > 10_000 for n in names)
