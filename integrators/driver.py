@@ -59,6 +59,7 @@ class PairSummary:
     breakdowns: int
     max_errors: dict
     wall_time: float
+    timings: dict = dataclasses.field(default_factory=dict)
 
 
 class Progress:
@@ -124,10 +125,14 @@ class Diagnostics:
         loop = slice(0, self.n_loop)
         surf = slice(self.n_loop, None)
         with np.errstate(all="ignore"):
+            # a set with a broken-down (frozen) point is no longer an advected set: NaN, not a number
             if self.n_loop:
                 ql, pl, ll = q[loop], p[loop], lam[loop]
-                res = 0.0
+                res = 0.0 if live[loop].all() else np.nan
                 for form in sc.forms:
+                    if not live[loop].all():
+                        row[f"I1/{form}"] = np.nan
+                        continue
                     try:
                         v = invariants.first_invariant(ql, form, system=sy, p=pl, lam=ll, h=sc.h)
                         row[f"I1/{form}"], res = v.value, max(res, v.resolution)
@@ -137,8 +142,11 @@ class Diagnostics:
             if self.surf_shape:
                 shp = self.surf_shape + (sy.d,)
                 qs, ps, ls = (a[surf].reshape(shp) for a in (q, p, lam))
-                res = 0.0
+                res = 0.0 if live[surf].all() else np.nan
                 for form in sc.forms:
+                    if not live[surf].all():
+                        row[f"I2/{form}"] = np.nan
+                        continue
                     try:
                         v = invariants.second_invariant(qs, form, system=sy, p=ps, lam=ls, h=sc.h)
                         row[f"I2/{form}"], res = v.value, max(res, v.resolution)
@@ -211,6 +219,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         f.flush()
     todo = comm.bcast(todo if rank == 0 else None, root=0)
 
+    timings = {}
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
     for (tab_name, proj), job in zip(scene.pairs, todo):
@@ -228,16 +237,20 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         g = f["runs"][name] if rank == 0 else None
         wall0 = float(g["wall_clock"][0]) if rank == 0 else 0.0
         t_start = time.perf_counter()
+        clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
         if start_step == 0:
-            _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name)
+            _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
         for step in range(start_step + 1, scene.steps + 1):
+            t0 = time.perf_counter()
             advance(stepper, st, step * h)
+            clock["advance"] += time.perf_counter() - t0
             if step % scene.output_every == 0:
                 if rank == 0:
                     g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
-                _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name)
+                _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
             if rank == 0:
                 bar.update(1, name)
+        timings[name] = clock
         if rank == 0:
             g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
             f.flush()
@@ -245,7 +258,10 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     if rank != 0:
         return None
     f.close()
-    return finalize(path, scene)
+    summaries = finalize(path, scene)
+    for s_ in summaries:
+        s_.timings = timings.get(s_.pair, {})
+    return summaries
 
 
 def _state_shapes(n, d, s):
@@ -268,13 +284,19 @@ def _unpad(state, s):
     return dict(state, Y=state["Y"][:, :s])
 
 
-def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name):
+def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, clock):
+    t0 = time.perf_counter()
     parts = comm.gather(_state_dict(st), root=0)
     if comm.rank != 0:
+        clock["gather"] += time.perf_counter() - t0
         return
     full = _concat(parts)
+    t1 = time.perf_counter()
+    clock["gather"] += t1 - t0
     q, p, lam, live = full["q"], full["p"], full["Lam"] / h, full["live"]
     row = diagnostics.row(step * h, q, p, lam, live)
+    t2 = time.perf_counter()
+    clock["invariants"] += t2 - t1
     if scene.store_points:
         nl = diagnostics.n_loop
         if scene.loop is not None:
@@ -284,6 +306,7 @@ def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name):
     output.append(g, row)
     g["breakdown_time"][...] = full["breakdown_time"]
     output.write_checkpoint(f, g, step, _pad(full, g["checkpoint/a/Y"].shape[1]))
+    clock["hdf5"] += time.perf_counter() - t2
     if after_output is not None:
         after_output(name, step)
 

@@ -1,0 +1,119 @@
+"""Service benchmarks (docs/benchmarks.md): what skipping saves, and MPI scaling.
+
+    python scripts/benchmark_service.py [--steps 100] [--out docs/figures/benchmark_service.json]
+
+A. Skip what the scene does not need: GLRK2-symmetric on guiding_centre_symmetric,
+   h = 10, `--steps` steps, output every 10: loop only (2,000 points), loop + surface
+   (2,000 + 100×100), and loop + surface without the corrected form.  Wall time and
+   peak resident memory of each run, every run in a fresh process.
+B. MPI: the paper's Poincaré scene cut to `--steps` steps, on 1 and 2 ranks (strong
+   scaling) and with the points doubled on 2 ranks (weak scaling: loop 4,000, surface
+   141×142), with the time per phase on rank 0 (advection, gather, invariants, HDF5).
+
+Each measurement is a child process: ``[mpiexec -n K] python scripts/benchmark_service.py
+--child SCENE OUT``, which runs the driver and prints one JSON line from rank 0.
+"""
+import argparse
+import json
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+BASE = """
+name = "{name}"
+[system]
+name = "guiding_centre_symmetric"
+{loop}
+{surface}
+[run]
+tableaus = {tableaus}
+projections = {projections}
+h = 10.0
+steps = {steps}
+output_every = 10
+forms = {forms}
+"""
+LOOP = "[loop]\nshape = \"guiding_centre\"\npoints = {n}\n"
+SURF = "[surface]\nshape = \"guiding_centre\"\nn_sigma = {ns}\nn_tau = {nt}\n"
+
+
+def scene_text(name, steps, loop=2000, surf=(100, 100), tableaus=("GLRK2",), projections=("symmetric",),
+               forms=("canonical", "noncanonical", "corrected")):
+    return BASE.format(name=name, loop=LOOP.format(n=loop) if loop else "",
+                       surface=SURF.format(ns=surf[0], nt=surf[1]) if surf else "",
+                       tableaus=json.dumps(list(tableaus)), projections=json.dumps(list(projections)),
+                       steps=steps, forms=json.dumps(list(forms)))
+
+
+def child(scene_path, out):
+    from integrators import driver
+    from integrators.scene import load_scene
+    comm = driver.communicator()
+    scene = load_scene(scene_path)
+    t0 = time.perf_counter()
+    summaries = driver.run(scene, out, force=True, comm=comm, progress=False)
+    wall = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB (Linux reports KiB)
+    rss_all = comm.gather(rss, root=0)
+    if comm.rank == 0:
+        phases = {}
+        for s in summaries:
+            for k, v in s.timings.items():
+                phases[k] = phases.get(k, 0.0) + v
+        print(json.dumps(dict(wall=wall, ranks=comm.size, peak_rss_mib=rss_all, phases=phases)))
+
+
+def measure(text, ranks, tmp):
+    path = Path(tmp) / "scene.toml"
+    path.write_text(text)
+    cmd = [sys.executable, __file__, "--child", str(path), str(Path(tmp) / "out.h5")]
+    if ranks > 1:
+        mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
+        cmd = [mpiexec, "-n", str(ranks)] + cmd
+    r = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--child", nargs=2)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "benchmark_service.json"))
+    args = ap.parse_args()
+    if args.child:
+        return child(*args.child)
+    res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=args.steps)}
+    with tempfile.TemporaryDirectory() as tmp:
+        skip = {}
+        for label, text in [
+            ("loop only", scene_text("a", args.steps, surf=None)),
+            ("loop + surface", scene_text("b", args.steps)),
+            ("loop + surface, no corrected form", scene_text("c", args.steps, forms=("canonical", "noncanonical"))),
+        ]:
+            skip[label] = measure(text, 1, tmp)
+            print(label, skip[label], flush=True)
+        res["skip"] = skip
+        paper = dict(tableaus=("GLRK1", "GLRK2", "SRK3"),
+                     projections=("none", "standard", "symmetric", "symplectic", "midpoint"))
+        mpi = {}
+        for label, text, ranks in [
+            ("1 rank", scene_text("p", args.steps, **paper), 1),
+            ("2 ranks", scene_text("p", args.steps, **paper), 2),
+            ("2 ranks, points doubled", scene_text("p", args.steps, loop=4000, surf=(141, 142), **paper), 2),
+        ]:
+            mpi[label] = measure(text, ranks, tmp)
+            print(label, mpi[label], flush=True)
+        res["mpi"] = mpi
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(res, indent=1))
+
+
+if __name__ == "__main__":
+    main()
