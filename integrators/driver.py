@@ -118,41 +118,35 @@ class Diagnostics:
         self.H0 = system.H(q0)
         self.P0 = system.momentum(q0) if "momentum" in scene.diagnostics else None
 
+    def _invariant(self, row, name, fn, q, p, lam, live):
+        """All forms of one invariant of one sample set, with its resolution, into ``row``.
+
+        A set with a broken-down (frozen) point is no longer an advected set: its values are NaN.
+        """
+        res = 0.0 if live.all() else np.nan
+        for form in self.scene.forms:
+            value = np.nan
+            if live.all():
+                try:
+                    v = fn(q, form, system=self.system, p=p, lam=lam, h=self.scene.h)
+                    value, res = v.value, max(res, v.resolution)
+                except ValueError:          # non-finite values
+                    res = np.nan
+            row[f"{name}/{form}"] = value
+        row[f"resolution/{name}"] = res
+
     def row(self, t, q, p, lam, live):
         import invariants
         sc, sy = self.scene, self.system
         row = {"t": t}
-        loop = slice(0, self.n_loop)
-        surf = slice(self.n_loop, None)
+        nl = self.n_loop
         with np.errstate(all="ignore"):
-            # a set with a broken-down (frozen) point is no longer an advected set: NaN, not a number
-            if self.n_loop:
-                ql, pl, ll = q[loop], p[loop], lam[loop]
-                res = 0.0 if live[loop].all() else np.nan
-                for form in sc.forms:
-                    if not live[loop].all():
-                        row[f"I1/{form}"] = np.nan
-                        continue
-                    try:
-                        v = invariants.first_invariant(ql, form, system=sy, p=pl, lam=ll, h=sc.h)
-                        row[f"I1/{form}"], res = v.value, max(res, v.resolution)
-                    except ValueError:          # non-finite points after a breakdown
-                        row[f"I1/{form}"], res = np.nan, np.nan
-                row["resolution/I1"] = res
+            if nl:
+                self._invariant(row, "I1", invariants.first_invariant, q[:nl], p[:nl], lam[:nl], live[:nl])
             if self.surf_shape:
                 shp = self.surf_shape + (sy.d,)
-                qs, ps, ls = (a[surf].reshape(shp) for a in (q, p, lam))
-                res = 0.0 if live[surf].all() else np.nan
-                for form in sc.forms:
-                    if not live[surf].all():
-                        row[f"I2/{form}"] = np.nan
-                        continue
-                    try:
-                        v = invariants.second_invariant(qs, form, system=sy, p=ps, lam=ls, h=sc.h)
-                        row[f"I2/{form}"], res = v.value, max(res, v.resolution)
-                    except ValueError:
-                        row[f"I2/{form}"], res = np.nan, np.nan
-                row["resolution/I2"] = res
+                self._invariant(row, "I2", invariants.second_invariant, q[nl:].reshape(shp), p[nl:].reshape(shp),
+                                lam[nl:].reshape(shp), live[nl:])
             if "energy" in sc.diagnostics:
                 row["energy_error"] = float(np.max(np.abs((sy.H(q) - self.H0) / self.H0)[live], initial=0.0))
             if "momentum" in sc.diagnostics:
