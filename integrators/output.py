@@ -68,10 +68,10 @@ def create(path, scene, version, npoints, state_shapes):
         g.create_dataset("wall_clock", data=np.zeros(1))
         if scene.store_points:
             if scene.loop is not None:
-                n, d = scene.loop["points"], state_shapes["q"][1]
+                n, d = scene.loop["points"], state_shapes["q"][0][1]
                 g.create_dataset("points/loop", shape=(0, n, d), maxshape=(None, n, d), dtype="f8", chunks=(1, n, d))
             if scene.surface is not None:
-                ns, nt, d = scene.surface["n_sigma"], scene.surface["n_tau"], state_shapes["q"][1]
+                ns, nt, d = scene.surface["n_sigma"], scene.surface["n_tau"], state_shapes["q"][0][1]
                 g.create_dataset("points/surface", shape=(0, ns, nt, d), maxshape=(None, ns, nt, d), dtype="f8",
                                  chunks=(1, ns, nt, d))
         for slot in ("a", "b"):
