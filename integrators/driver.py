@@ -279,6 +279,9 @@ def _unpad(state, s):
 
 
 def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, clock):
+    # every output is a checkpoint: the next step starts from fresh Jacobians on every rank, so
+    # a resumed run (which has no Jacobians to carry) is bitwise the uninterrupted one
+    st.forget_jacobians()
     t0 = time.perf_counter()
     parts = comm.gather(_state_dict(st), root=0)
     if comm.rank != 0:

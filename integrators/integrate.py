@@ -69,6 +69,16 @@ class State:
         self.breakdown_time = np.full(n, np.inf)
         self.iterations = np.zeros(n, dtype=np.int64)
         self.steps = np.zeros(n, dtype=np.int64)
+        # inverse Jacobians of the last step's solve, reused by the next one (allocated at the
+        # first step, when the size of the step's system is known); not part of a checkpoint:
+        # call forget_jacobians() wherever a run may be resumed from, so that a resumed run is
+        # bitwise the run it continues
+        self.jinv = None
+        self.have_jinv = np.zeros(n, dtype=bool)
+
+    def forget_jacobians(self):
+        """Start every point's next solve from a fresh Jacobian."""
+        self.have_jinv[:] = False
 
 
 def _kahan(x, comp, inc):
@@ -78,12 +88,18 @@ def _kahan(x, comp, inc):
     return t, y - (t - x)
 
 
-def _attempt(stepper, state, idx, guess, mu0):
+def _attempt(stepper, state, idx, guess, mu0, reuse=True):
     """One step for the points idx from the given guesses; returns (ok, new values)."""
     sysm = stepper.system
     q = state.q[idx]
+    if state.jinv is None or state.jinv.shape[1] != stepper.nz:
+        state.jinv = np.empty((state.q.shape[0], stepper.nz, stepper.nz))
+        state.have_jinv[:] = False
+    known = state.have_jinv[idx] if reuse else np.zeros(idx.size, dtype=bool)
+    # while every point is live, Newton refreshes the inverses in place (no gather, no copy back)
+    jinv = state.jinv if idx.size == state.q.shape[0] else state.jinv[idx]
     with np.errstate(all="ignore"):
-        res = stepper.step(q, state.p[idx], state.Lam[idx], guess, mu0)
+        res = stepper.step(q, state.p[idx], state.Lam[idx], guess, mu0, jinv, known)
         q_new, qc_new = _kahan(q, state.q_comp[idx], res.inc_q)
         if res.inc_p is None:
             p_new, pc_new = res.p, state.p_comp[idx]
@@ -104,6 +120,9 @@ def _commit(state, idx, ok, new):
     if res.mu is not None:
         state.mu[good] = res.mu[ok]
     state.have_history[good] = True
+    if res.jinv is not state.jinv:
+        state.jinv[good] = res.jinv[ok]
+    state.have_jinv[idx] = ok
     state.iterations[idx] += res.iterations
     state.steps[good] += 1
 
@@ -111,8 +130,9 @@ def _commit(state, idx, ok, new):
 def advance(stepper: Stepper, state: State, t_next: float):
     """Advance every live point of ``state`` by one step (in place).
 
-    A point whose step fails from the extrapolated guess is tried once more from the
-    vector-field guess h·q̇(q_n) before it is declared broken down.
+    A point whose step fails from the extrapolated guess (and the last step's Jacobian) is
+    tried once more from the vector-field guess h·q̇(q_n) and a fresh Jacobian before it is
+    declared broken down.
     """
     idx = np.flatnonzero(state.live)
     if idx.size == 0:
@@ -126,7 +146,8 @@ def advance(stepper: Stepper, state: State, t_next: float):
     retry = ~ok & ~fresh
     if retry.any():
         ridx = idx[retry]
-        ok_r, new_r = _attempt(stepper, state, ridx, stepper.first_guess(state.q[ridx]), np.zeros_like(state.q[ridx]))
+        ok_r, new_r = _attempt(stepper, state, ridx, stepper.first_guess(state.q[ridx]), np.zeros_like(state.q[ridx]),
+                              reuse=False)
         _commit(state, ridx, ok_r, new_r)
         ok[retry] = ok_r
     bad = idx[~ok]
@@ -206,6 +227,8 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
             advance(stepper, st, t0 + step * h)
         if step % save_every == 0:
             record(step // save_every)
+            for st in states:     # as the driver does at its checkpoints: same bits as a scene run
+                st.forget_jacobians()
         if progress is not None:
             progress(step, steps)
     cat = lambda name: np.concatenate([getattr(st, name) for st in states])

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 EPS = np.finfo(float).eps
+COMPLEX_STEP = 1e-30   # the audit's complex-step size: imaginary parts are derivatives × this
 
 
 def invert_batched(J):
@@ -38,13 +39,15 @@ def apply_batched(M, r):
     return np.matmul(M, r[..., None])[..., 0]
 
 
-def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25):
+def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25, jinv=None, known=None):
     """Solve fun(idx, z)[0] = 0 for every row of z.
 
-    Newton's method with the exact Jacobian, kept across iterations while it works: the
-    Jacobian is evaluated and inverted at the first iteration and again for any point whose
-    update shrank by less than the factor ``refresh`` in its last iteration.  Between
-    refreshes an iteration costs one residual evaluation and a matrix–vector product.
+    Newton's method with the exact Jacobian, kept while it works: the Jacobian is evaluated
+    and inverted at the first iteration (unless the caller hands in an inverse from the last
+    step, ``jinv``/``known``) and again for any point whose update shrank by less than the
+    factor ``refresh`` in its last iteration.  Between refreshes an iteration costs one
+    residual evaluation and a matrix–vector product.  Every decision is per point, so a
+    point's iterates never depend on the rest of the batch.
 
     Parameters
     ----------
@@ -53,7 +56,12 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25
           False), extras a dict of (m, ...) arrays computed along with the residual
     z0 : (n, nz) initial guess (not modified)
     scale : (n, nz) positive scale of each unknown
-    tol : converged when max |δ|/scale ≤ tol
+    jinv : optional (n, nz, nz) inverse Jacobians to start from (e.g. the last step's); it is
+           updated in place with every refresh, so the caller can carry it to the next solve
+    known : (n,) bool, rows of ``jinv`` that hold a usable inverse (the others start fresh)
+    tol : converged when max |δ|/scale ≤ tol.  For complex z (complex-step derivatives, used by
+          the audit, perturbations i·COMPLEX_STEP) the imaginary part, read as a derivative, must
+          meet the same test.
     stall : also converged when max |δ|/scale ≤ stall and the update no longer
             halves (the iteration has reached its round-off floor)
 
@@ -66,18 +74,25 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25
     """
     z = z0.copy()
     n, nz = z.shape
+    complex_step = np.iscomplexobj(z)
+    if complex_step:      # derivatives: accept a round-off floor only when it is a tight one
+        stall = min(stall, 1e-13)
     converged = np.zeros(n, dtype=bool)
     iterations = np.zeros(n, dtype=np.int64)
     previous = np.full(n, np.inf)
-    stale = np.ones(n, dtype=bool)           # needs a fresh Jacobian
-    Jinv = np.empty((n, nz, nz)) if n else None
+    if jinv is None:
+        Jinv = np.empty((n, nz, nz), dtype=z.dtype)
+        stale = np.ones(n, dtype=bool)       # needs a fresh Jacobian
+    else:
+        Jinv = jinv
+        stale = np.ones(n, dtype=bool) if known is None else ~known
     z_eval = z.copy()
     extras = {}
 
     def keep(rows, ex):
         for key, val in ex.items():
             if key not in extras:
-                extras[key] = np.full((n,) + val.shape[1:], np.nan)
+                extras[key] = np.full((n,) + val.shape[1:], np.nan, dtype=val.dtype)
             extras[key][rows] = val
     active = np.arange(n)
     for _ in range(maxiter):
@@ -92,7 +107,7 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25
             r, J, ex = fun(active, za, True)
             keep(sel, ex)
             if everyone:
-                Jinv = invert_batched(J)
+                Jinv[...] = invert_batched(J)
             else:
                 Jinv[active] = invert_batched(J)
         else:
@@ -107,7 +122,9 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.25
         za = za + delta
         z[sel] = za
         iterations[sel] += 1
-        size = np.max(np.abs(delta) / scale[sel], axis=1)
+        size = np.max(np.abs(delta.real) / scale[sel], axis=1)
+        if complex_step:       # the derivative (imaginary part) must converge too, to its own scale
+            size = np.maximum(size, np.max(np.abs(delta.imag) / (COMPLEX_STEP * scale[sel]), axis=1))
         prev = previous[sel]
         bad = ~np.isfinite(size) | ~np.all(np.isfinite(za), axis=1)
         with np.errstate(invalid="ignore"):

@@ -61,7 +61,7 @@ def _apply_rows(E, Y):
 class StepResult:
     """Outcome of one step for n points (all arrays have a leading points axis)."""
 
-    __slots__ = ("q", "p", "Lam", "Y", "mu", "ok", "iterations", "inc_q", "inc_p")
+    __slots__ = ("q", "p", "Lam", "Y", "mu", "ok", "iterations", "inc_q", "inc_p", "jinv")
 
 
 class Stepper:
@@ -207,7 +207,7 @@ class Stepper:
 
         return fun, unpack, qbar, pbar, Theta_q
 
-    def step(self, q, p, Lam, Y0, mu0):
+    def step(self, q, p, Lam, Y0, mu0, jinv=None, known=None):
         """Advance n points by one step.
 
         Parameters
@@ -216,12 +216,16 @@ class Stepper:
         Lam : (n, d) last Λ = hλ (guess for standard/symmetric/midpoint; Λ_n for symplectic)
         Y0 : (n, s, d) guess of the stage displacements
         mu0 : (n, d) guess of the Lobatto multiplier
+        jinv, known : optional (n, nz, nz) inverse Jacobians of the step's system from the last
+            step and the (n,) mask of rows that hold one; Newton starts from them (and refreshes
+            a point's inverse when its iteration stops contracting).  Updated in place.
 
         Returns
         -------
         StepResult with increments ``inc_q`` (to be added to q with compensated
         summation), ``p`` (p_{n+1} as the method computes it), ``Lam`` (Λ of this
-        step), ``Y``/``mu`` (for the next guess), ``ok`` (n,) and ``iterations`` (n,).
+        step), ``Y``/``mu`` (for the next guess), ``ok`` (n,), ``iterations`` (n,) and
+        ``jinv`` (the inverse Jacobians at the end of the solve, for the next step).
         """
         sysm, tab, h, sig = self.system, self.tableau, self.h, self.sigma
         s, d = self.s, self.d
@@ -231,7 +235,7 @@ class Stepper:
         iL = sd if self.coupled else None
         iM = sd + (d if self.coupled else 0) if self.lobatto else None
         fun, unpack, qbar, pbar, Theta_q = self.equations(q, p, Lam)
-        z0 = np.empty((n, self.nz))
+        z0 = np.empty((n, self.nz), dtype=np.result_type(q, Lam, Y0))   # complex for complex-step derivatives
         z0[:, :sd] = Y0.reshape(n, sd)
         if self.coupled:
             z0[:, iL:iL + d] = Lam
@@ -245,10 +249,12 @@ class Stepper:
         scale = np.where(np.isfinite(scale), scale, 1.0)
         # the solution is the last iterate at which the residual was evaluated (its update was
         # below tolerance), so the step's outputs come from that evaluation, not a new one
-        z, ok, its, ex = newton(fun, z0, scale)
+        if jinv is None:
+            jinv, known = np.empty((n, self.nz, self.nz), dtype=z0.dtype), np.zeros(n, dtype=bool)
+        z, ok, its, ex = newton(fun, z0, scale, jinv=jinv, known=known)
         Y, L, mu = unpack(z)
         out = StepResult()
-        out.Y, out.mu, out.iterations = Y, mu, its
+        out.Y, out.mu, out.iterations, out.jinv = Y, mu, its, jinv
         if proj == "none":
             out.inc_q, out.inc_p, out.p, out.Lam = ex["sumbY"], ex["sumbG"], None, np.zeros_like(q)
         elif self.coupled:

@@ -176,9 +176,10 @@ class System:
         The paper prints Ω̄ᵀ q̇ = ∇H in eq:euler_lagrange_equations_matrix with the same
         definition of Ω̄; that transpose flips the direction of time (for the guiding
         centre it would give ż = −u instead of b·ẋ = u), so we follow the Euler–Lagrange
-        equations.  See docs/conventions.md.
+        equations.  See docs/conventions.md.  Complex q is kept (complex-step derivatives).
         """
-        q = np.asarray(q, dtype=float)
+        q = np.asarray(q)
+        q = q if np.iscomplexobj(q) else q.astype(float)
         return np.linalg.solve(self.Omega(q), self.dH(q)[..., None])[..., 0]
 
     def in_domain(self, q):
