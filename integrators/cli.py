@@ -1,6 +1,7 @@
-"""The `poincare` command line: run | scenes | plot | list.
+"""The `poincare` command line: run | audit | scenes | plot | list.
 
     poincare run [SCENE] [-o OUT] [--resume] [--force]     (mpiexec -n K poincare run … to distribute)
+    poincare audit CANDIDATE [--projection P …] [--scene SCENE] [--reference TAB-PROJ …] [--json F] [--plots DIR]
     poincare scenes
     poincare plot OUT.h5 [-o DIR]
     poincare list tableaus|systems
@@ -10,6 +11,7 @@ Bad input exits with status 2 and one line on stderr naming the problem.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 import numpy as np
@@ -42,6 +44,35 @@ def cmd_run(args) -> int:
                     progress=False if args.quiet else None, version=__version__)
     if comm.rank == 0:
         _print_summary(summaries, out)
+    return 0
+
+
+def cmd_audit(args) -> int:
+    import json
+    from . import audit
+    from .scene import load_scene
+    scene = load_scene(args.scene)
+    if args.steps is not None:
+        if args.steps < 1:
+            raise ValueError(f"--steps must be a positive integer, got {args.steps}")
+        scene = dataclasses.replace(scene, steps=args.steps)
+    cands = audit.candidates_from(args.candidate, args.projection)
+    refs = []
+    for ref in ([] if args.reference == ["none"] else args.reference):
+        tab, sep, proj = ref.rpartition("-")
+        if not sep:
+            raise ValueError(f"reference '{ref}' must be TABLEAU-projection, e.g. GLRK2-symmetric")
+        refs += audit.candidates_from(tab, [proj])
+    say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    report = audit.audit(cands, scene, references=refs, defect_points=args.points, levels=args.levels, progress=say)
+    print(audit.text_report(report))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(report, fh, indent=1)
+        print(f"wrote {args.json}")
+    if args.plots:
+        for path in audit.plot_report(report, args.plots):
+            print(f"wrote {path}")
     return 0
 
 
@@ -86,6 +117,25 @@ def build_parser():
     run.add_argument("--force", action="store_true", help="overwrite an existing output file")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=cmd_run)
+    au = sub.add_parser("audit", help="which symplectic forms does an integrator preserve?",
+                        description="Invariant drift on a scene's loop and surface, and the one-step "
+                                    "symplecticity defect with its order in h, for a tableau (built-in name or "
+                                    "TOML file, with each projection it admits) or a batched step map "
+                                    "module:function / file.py:function with signature "
+                                    "step(q, p, lam, h, system) -> (q, p, lam). Thresholds: docs/audit.md.")
+    au.add_argument("candidate", help="built-in tableau, tableau .toml file, or module:function")
+    au.add_argument("--projection", nargs="+", default=None,
+                    help="projections to audit a tableau with (default: every one it admits)")
+    au.add_argument("--scene", default=None, help="scene giving system, h, steps, loop and surface (default: 'default')")
+    au.add_argument("--steps", type=int, default=None, help="override the scene's number of steps")
+    au.add_argument("--reference", nargs="+", default=["GLRK2-symmetric", "GLRK2-standard"],
+                    help="built-in pairs run side by side ('none' for no references)")
+    au.add_argument("--points", type=int, default=4, help="sample points of the one-step defect")
+    au.add_argument("--levels", type=int, default=5, help="step sizes h, h/2, … of the defect study")
+    au.add_argument("--json", help="write the full report as JSON")
+    au.add_argument("--plots", help="directory for the PNG plots")
+    au.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    au.set_defaults(func=cmd_audit)
     sc = sub.add_parser("scenes", help="list the built-in scenes")
     sc.set_defaults(func=cmd_scenes)
     pl = sub.add_parser("plot", help="PNG plots of a run file")
