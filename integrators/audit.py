@@ -482,38 +482,46 @@ def plot_report(report, directory) -> list[Path]:
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     cands = report["candidates"]
-    keys = sorted({k for c in cands for k in c["errors"]})
-    fig, axes = plt.subplots(1, max(len(keys), 1), figsize=(4 * max(len(keys), 1), 3.4), squeeze=False)
-    for ax, key in zip(axes[0], keys):
-        for c in cands:
-            if key in c["errors"]:
-                e = np.maximum(np.array(c["errors"][key], float), 1e-17)
-                ax.semilogy(c["t"], e, ("-" if c["role"] == "candidate" else "--"), label=c["name"])
-        ax.set_title(key, fontsize=9)
-        ax.set_xlabel("t")
-        ax.axhline(ROUNDOFF, color="grey", lw=0.5)
-    axes[0][0].set_ylabel("|I(t) − I(0)| / |I(0)|")
-    axes[0][0].legend(fontsize=7)
-    fig.suptitle(f"invariant errors, scene {report['scene']}", fontsize=10)
-    fig.tight_layout()
-    p1 = directory / "audit_invariants.png"
-    fig.savefig(p1, dpi=90)
-    plt.close(fig)
+    colour = {c["name"]: f"C{k % 10}" for k, c in enumerate(cands)}     # one colour per candidate throughout
+    style = {c["name"]: "-" if c["role"] == "candidate" else "--" for c in cands}
     forms = ("canonical", "noncanonical", "corrected")
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), squeeze=False)
+    invs = sorted({k.split("/")[0] for c in cands for k in c["errors"]})
+    fig, axes = plt.subplots(max(len(invs), 1), 3, figsize=(12, 3.2 * max(len(invs), 1)), squeeze=False)
+    for row, inv in zip(axes, invs):
+        for ax, form in zip(row, forms):
+            key = f"{inv}/{form}"
+            for c in cands:
+                if key in c["errors"]:
+                    e = np.maximum(np.array(c["errors"][key], float), 1e-17)
+                    ax.semilogy(c["t"], e, style[c["name"]], color=colour[c["name"]], label=c["name"])
+            ax.axhline(ROUNDOFF, color="grey", lw=0.5)
+            ax.set_title(key, fontsize=9)
+            ax.set_xlabel("t")
+        row[0].set_ylabel("|I(t) − I(0)| / |I(0)|")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8)
+    fig.suptitle(f"invariant errors, scene {report['scene']} (grey: round-off threshold)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    p1 = directory / "audit_invariants.png"
+    fig.savefig(p1, dpi=80)
+    plt.close(fig)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.8), squeeze=False)
     for ax, form in zip(axes[0], forms):
         for c in cands:
             r = c["defect"].get(form)
             if r and r["defect"]:
-                ax.loglog(np.abs(r["h"]), np.maximum(r["defect"], 1e-18), "o-" if c["role"] == "candidate" else "s--",
-                          label=c["name"], ms=3)
+                ax.loglog(np.abs(r["h"]), np.maximum(r["defect"], 1e-18), "o" + style[c["name"]],
+                          color=colour[c["name"]], label=c["name"], ms=3)
         ax.axhline(DEFECT_FLOOR["complex step"], color="grey", lw=0.5)
         ax.set_title(f"{form} defect", fontsize=9)
         ax.set_xlabel("h")
     axes[0][0].set_ylabel("relative defect")
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
+    handles = [plt.Line2D([], [], color=colour[c["name"]], ls=style[c["name"]], marker="o", ms=3) for c in cands]
+    fig.legend(handles, [c["name"] for c in cands], loc="lower center", ncol=min(len(cands), 4), fontsize=8)
+    fig.suptitle("one-step symplecticity defect (grey: complex-step floor; absent: the map does not read "
+                 "the form's inputs)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     p2 = directory / "audit_defects.png"
-    fig.savefig(p2, dpi=90)
+    fig.savefig(p2, dpi=80)
     plt.close(fig)
     return [p1, p2]
