@@ -1,7 +1,8 @@
 """The batch-run driver: every (tableau, projection) pair of a scene, distributed over MPI ranks.
 
 The sample points (loop first, then the surface row by row) are split into contiguous
-blocks, one per rank.  Each rank advances its block with each pair; at every output
+blocks, one per rank; from the second pair on, rank 0's block is smaller by the measured
+cost of its output work (see ``_split``).  Each rank advances its block with each pair; at every output
 time rank 0 gathers the points, computes the invariants and diagnostics and appends
 one row to the HDF5 file (see :mod:`integrators.output`), plus a checkpoint of the
 full integrator state.  Because a point's trajectory does not depend on its batch,
@@ -87,9 +88,27 @@ class Progress:
         sys.stderr.flush()
 
 
-def _split(n, size):
-    bounds = np.linspace(0, n, size + 1).round().astype(int)
+def _split(n, size, offload=0.0):
+    """Contiguous blocks of n points, one per rank: [(lo, hi), ...].
+
+    Rank 0 also gathers, computes the invariants and writes the file at every output; it
+    takes ``offload`` points fewer than the other ranks, so that everyone reaches the next
+    output at the same time (rank 0: c·n₀ + S = c·n_r for the others, offload = S/c).  Its
+    block never drops below a quarter of an even share.  Any split gives the same numbers:
+    a point's trajectory does not depend on its batch.
+    """
+    if size == 1:
+        return [(0, n)]
+    n0 = max((n - (size - 1) * offload) / size, n / (4 * size))
+    bounds = np.concatenate([[0], np.linspace(min(n0, n / size), n, size).round()]).astype(int)
     return [(int(bounds[k]), int(bounds[k + 1])) for k in range(size)]
+
+
+def _offload(clock, n0):
+    """Rank 0's output work in points' worth of advance (S/c) from one pair's clock."""
+    if n0 == 0 or clock["advance"] <= 0.0:
+        return 0.0
+    return (clock["invariants"] + clock["hdf5"]) / (clock["advance"] / n0)
 
 
 def _state_dict(st: State):
@@ -178,7 +197,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     pts = [a.reshape(-1, system.d) for a in (scene.loop_points(), scene.surface_points()) if a is not None]
     q0 = np.concatenate(pts)
     n = q0.shape[0]
-    lo, hi = _split(n, size)[rank]
+    offload = 0.0          # rebalanced after every pair from rank 0's measured output work
     h = scene.h
     n_out = scene.n_outputs
 
@@ -223,6 +242,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         start_step, saved = job
         tab = builtin_tableau(tab_name)
         stepper = Stepper(system, tab, proj, h)
+        blocks = comm.bcast(_split(n, size, offload) if rank == 0 else None, root=0)
+        lo, hi = blocks[rank]
         if saved is None:
             st = State(q0[lo:hi], system.theta(q0[lo:hi]), np.zeros((hi - lo, system.d)), h, tab.s)
         else:
@@ -245,6 +266,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             if rank == 0:
                 bar.update(1, name)
         timings[name] = clock
+        if rank == 0:
+            offload = _offload(clock, hi - lo)
         if rank == 0:
             g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
             f.flush()

@@ -229,3 +229,19 @@ def test_plots_are_written(tmp_path):
     assert names == sorted([f"p_I{k}_{f}.png" for k in (1, 2) for f in ("canonical", "corrected", "noncanonical")]
                            + ["p_diagnostics.png", "p_points.png"])
     assert all((tmp_path / "png" / n).stat().st_size > 10_000 for n in names)
+
+
+def test_split_gives_rank0_less_work_by_its_output_cost():
+    from integrators.driver import _split
+    for n, size, off in [(12000, 2, 800.0), (12000, 3, 800.0), (1001, 4, 37.0), (176, 2, 0.0)]:
+        blocks = _split(n, size, off)
+        assert blocks[0][0] == 0 and blocks[-1][1] == n
+        assert all(a[1] == b[0] for a, b in zip(blocks, blocks[1:]))        # contiguous, no gaps
+        sizes = [hi - lo for lo, hi in blocks]
+        others = sizes[1:]
+        assert max(others) - min(others) <= 1
+        # rank 0 takes `off` points fewer than each other rank (to rounding)
+        assert abs((np.mean(others) - sizes[0]) - off) <= 1
+    # a huge output cost leaves rank 0 a quarter of an even share, not nothing
+    assert _split(1000, 2, 1e9)[0] == (0, 125)
+    assert _split(5, 1, 3.0) == [(0, 5)]
