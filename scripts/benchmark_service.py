@@ -10,6 +10,15 @@ B. MPI: the paper's Poincaré scene cut to `--steps` steps, on 1 and 2 ranks (st
    scaling) and with the points doubled on 2 ranks (weak scaling: loop 4,000, surface
    141×142), with the time per phase on rank 0 (advection, gather, invariants, HDF5).
 
+C. ``--paper``: the built-in paper_poincare scene itself (1,000 steps) on 1 and 2 ranks, with the
+   time per phase, and a check that the two HDF5 files are bitwise identical; written to
+   docs/figures/benchmark_paper_mpi.json.
+
+D. ``--scale``: throughput at scale, a loop of 10³ (baseline), 10⁵ and 10⁶ points, GLRK2-symmetric,
+   10 steps with one output, on 1 and 2 ranks: point-steps per second of the advance phase and
+   peak resident memory per point ((peak − peak of the 10³-point run) / points); written to
+   docs/figures/benchmark_scale.json.
+
 Each measurement is a child process: ``[mpiexec -n K] python scripts/benchmark_service.py
 --child SCENE OUT``, which runs the driver and prints one JSON line from rank 0.
 """
@@ -70,10 +79,10 @@ def child(scene_path, out):
         print(json.dumps(dict(wall=wall, ranks=comm.size, peak_rss_mib=rss_all, phases=phases)))
 
 
-def measure(text, ranks, tmp):
+def measure(text, ranks, tmp, out_name="out.h5"):
     path = Path(tmp) / "scene.toml"
     path.write_text(text)
-    cmd = [sys.executable, __file__, "--child", str(path), str(Path(tmp) / "out.h5")]
+    cmd = [sys.executable, __file__, "--child", str(path), str(Path(tmp) / out_name)]
     if ranks > 1:
         mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
         cmd = [mpiexec, "-n", str(ranks)] + cmd
@@ -81,14 +90,72 @@ def measure(text, ranks, tmp):
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def identical_files(a, b):
+    """Names of the datasets that differ (bitwise) between two HDF5 files, and the count compared.
+
+    Each pair's ``wall_clock`` (its run time) differs by nature and is left out of the count.
+    """
+    import h5py
+    import numpy as np
+    names, differ = [], []
+    with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
+        fa.visit(lambda n: names.append(n) if isinstance(fa[n], h5py.Dataset) and not n.endswith("wall_clock") else None)
+        for n in names:
+            x, y = fa[n][()], fb[n][()] if n in fb else None
+            if y is None or np.asarray(x).tobytes() != np.asarray(y).tobytes():
+                differ.append(n)
+    return differ, len(names)
+
+
+def paper_experiment(out):
+    text = (ROOT / "integrators" / "scenes" / "paper_poincare.toml").read_text()
+    res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), scene="paper_poincare")}
+    with tempfile.TemporaryDirectory() as tmp:
+        for ranks in (1, 2):
+            res[f"{ranks} rank(s)"] = measure(text, ranks, tmp, out_name=f"r{ranks}.h5")
+            print(ranks, res[f"{ranks} rank(s)"], flush=True)
+        differ, n = identical_files(Path(tmp) / "r1.h5", Path(tmp) / "r2.h5")
+        res["datasets compared"], res["datasets differing"] = n, differ
+        print(f"{n} datasets compared, {len(differ)} differ", flush=True)
+    Path(out).write_text(json.dumps(res, indent=1))
+
+
+def scale(out):
+    res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=10,
+                        pair="GLRK2-symmetric", system="guiding_centre_symmetric")}
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (1000, 100_000, 1_000_000):
+            for ranks in (1, 2):
+                text = scene_text("s", 10, loop=n, surf=None)
+                r = measure(text, ranks, tmp)
+                r.update(points=n, point_steps_per_s=n * 10 / r["phases"]["advance"])
+                runs.append(r)
+                print(n, ranks, json.dumps(r), flush=True)
+                res["runs"] = runs
+                Path(out).write_text(json.dumps(res, indent=1))
+    base = {r["ranks"]: r for r in runs if r["points"] == 1000}
+    for r in runs:
+        if r["points"] > 1000:
+            b = base[r["ranks"]]["peak_rss_mib"]
+            r["rss_per_point_kib"] = [(x - y) * 1024 / (r["points"] / r["ranks"]) for x, y in zip(r["peak_rss_mib"], b)]
+    Path(out).write_text(json.dumps(res, indent=1))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--child", nargs=2)
     ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "benchmark_service.json"))
+    ap.add_argument("--scale", action="store_true", help="10^5 and 10^6 loop points on 1 and 2 ranks")
+    ap.add_argument("--paper", action="store_true", help="the full paper scene on 1 and 2 ranks (about 45 min)")
     args = ap.parse_args()
     if args.child:
         return child(*args.child)
+    if args.scale:
+        return scale(ROOT / "docs" / "figures" / "benchmark_scale.json")
+    if args.paper:
+        return paper_experiment(ROOT / "docs" / "figures" / "benchmark_paper_mpi.json")
     res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=args.steps)}
     with tempfile.TemporaryDirectory() as tmp:
         skip = {}

@@ -1,0 +1,270 @@
+"""Work–precision: wall time against error, VPRK pairs against scipy (docs/benchmarks.md).
+
+    python scripts/work_precision.py trajectory [--systems ...]   # docs/figures/work_precision/<system>.json
+    python scripts/work_precision.py invariants [--steps 10000]   # docs/figures/work_precision/invariants.json
+    python scripts/work_precision.py plot                         # docs/figures/work_precision*.png
+
+trajectory
+    For each system, 16 points near the paper's initial condition, advanced to T = 64 h₀ (h₀ the
+    paper's step) by every tableau × projection pair at h₀, h₀/2 and h₀/4, and by scipy's
+    ``solve_ivp`` (DOP853 and Radau, rtol = atol from 1e-3 to 1e-13) on the explicit ODE
+    q̇ = Ω̄(q)⁻¹∇H(q) (eq:euler_lagrange_equations; ``System.vector_field``), all 16 points as
+    one vectorised ODE, Radau with the block-diagonal Jacobian sparsity.  Error: the largest
+    component of |q(T) − q_ref(T)| / max(1, |q_ref(T)|) over the points.  Reference: the exact
+    flow for guiding_centre_symmetric, otherwise DOP853 at rtol = atol = 1e-13; its own error is
+    estimated by DOP853 at 3e-14 and recorded as ``reference_check``.  Time: wall time of the
+    call (``integrate`` including its set-up; ``solve_ivp``), one run each.
+invariants
+    guiding_centre_symmetric, the paper's loop with 1,000 points and surface with 32 × 32
+    Chebyshev points (both resolved to round-off by the exact flow at T = 10⁵), h = 10 for
+    ``--steps`` steps: the relative error |I(T) − I(0)|/|I(0)| of the noncanonical I₁ and I₂
+    for a set of VPRK pairs and for DOP853/Radau over tolerances.
+"""
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.sparse import block_diag
+
+import integrators
+from integrators import PROJECTIONS, TABLEAU_NAMES
+from integrators.integrate import integrate
+from invariants import forms, samples
+
+ROOT = Path(__file__).resolve().parents[1]
+FIG = ROOT / "docs" / "figures"
+DATA = FIG / "work_precision"
+NPOINTS = 16
+T_STEPS = 64
+SYSTEMS = {   # name: (system, centre, spread, h0)
+    "lotka_volterra_2d": ([1.0, 1.0], 0.05, 0.1),
+    "point_vortices": ([1.0, 0.1, 1.0, -0.1], 0.01, 0.1),
+    "guiding_centre_tokamak": ([2.5, 0.0, 0.0, 0.5], 0.01, 2.5),
+    "guiding_centre_symmetric": ([0.5, 0.0, 0.0, 0.5], 0.05, 10.0),
+}
+DOP_TOLS = [1e-3, 1e-5, 1e-7, 1e-9, 1e-11, 1e-12]    # 1e-13 is the reference
+RADAU_TOLS = [1e-3, 1e-5, 1e-7, 1e-9, 1e-11]
+
+
+def admissible_pairs():
+    out = []
+    for name in TABLEAU_NAMES:
+        tab = integrators.tableau(name)
+        for proj in PROJECTIONS:
+            if proj in ("symmetric", "symplectic", "midpoint") and abs(tab.R_inf) != 1.0:
+                continue
+            out.append((name, proj))
+    return out
+
+
+def scipy_solve(system, q0, T, method, tol):
+    """All points as one ODE; returns (q(T) (n, d) or None, wall seconds, function evaluations)."""
+    n, d = q0.shape
+
+    def f(t, y):
+        return system.vector_field(y.reshape(n, d)).ravel()
+
+    kw = {}
+    if method == "Radau":
+        kw["jac_sparsity"] = block_diag([np.ones((d, d))] * n).tocsc()
+    t0 = time.perf_counter()
+    with np.errstate(all="ignore"):
+        sol = solve_ivp(f, (0.0, T), q0.ravel(), method=method, rtol=tol, atol=tol, **kw)
+    wall = time.perf_counter() - t0
+    if not sol.success:
+        return None, wall, int(sol.nfev)
+    return sol.y[:, -1].reshape(n, d), wall, int(sol.nfev)
+
+
+def error(q, ref):
+    if q is None or not np.all(np.isfinite(q)):
+        return None
+    return float(np.max(np.abs(q - ref) / np.maximum(1.0, np.abs(ref))))
+
+
+def start_points(system, centre, spread, rng):
+    q0 = np.asarray(centre) + spread * rng.uniform(-1.0, 1.0, (NPOINTS, len(centre)))
+    assert system.in_domain(q0).all()
+    return q0
+
+
+def trajectory(args):
+    DATA.mkdir(parents=True, exist_ok=True)
+    for name in args.systems:
+        if name not in SYSTEMS:
+            raise SystemExit(f"error: unknown system '{name}'; choose from {', '.join(SYSTEMS)}")
+        rng = np.random.default_rng(6)
+        out = {"meta": dict(machine=platform.platform(), python=platform.python_version(), points=NPOINTS,
+                            T="64 h0", numpy=np.__version__)}
+        centre, spread, h0 = SYSTEMS[name]
+        system = integrators.system(name)
+        q0 = start_points(system, centre, spread, rng)
+        T = T_STEPS * h0
+        system.vector_field(q0); system.ddtheta(q0); system.ddH(q0)       # generate code outside timings
+        if name == "guiding_centre_symmetric":
+            ref = system.exact_flow(q0, T)
+            check = 0.0
+        else:
+            ref = scipy_solve(system, q0, T, "DOP853", 1e-13)[0]
+            check = error(scipy_solve(system, q0, T, "DOP853", 3e-14)[0], ref)
+        rows = []
+        for method, tols in (("DOP853", DOP_TOLS), ("Radau", RADAU_TOLS)):
+            for tol in tols:
+                q, wall, nfev = scipy_solve(system, q0, T, method, tol)
+                rows.append(dict(method=method, tol=tol, wall=wall, error=error(q, ref), nfev=nfev))
+                print(f"{name:26s} {method:8s} tol {tol:7.0e} {wall:8.3f} s  error {rows[-1]['error']}", flush=True)
+        for tab, proj in admissible_pairs():
+            for k in range(3):
+                h = h0 / 2 ** k
+                t0 = time.perf_counter()
+                sol = integrate(system, q0, tab, proj, h, steps=T_STEPS * 2 ** k, save_every=T_STEPS * 2 ** k)
+                wall = time.perf_counter() - t0
+                broke = int(np.isfinite(sol.breakdown_time).sum())
+                err = None if broke else error(sol.q[-1], ref)
+                rows.append(dict(method=f"{tab}-{proj}", tableau=tab, projection=proj, h=h, wall=wall,
+                                 error=err, broke=broke, newton=sol.mean_newton_iterations))
+            print(f"{name:26s} {tab:9s} {proj:10s} errors {[r['error'] for r in rows[-3:]]}", flush=True)
+        out.update(system=name, T=T, h0=h0, reference_check=check, runs=rows)
+        (DATA / f"{name}.json").write_text(json.dumps(out, indent=0))
+
+
+def invariant_errors(system, loop_q, surf_q, I1_0, I2_0):
+    i1 = forms.first_invariant(loop_q, "noncanonical", system)
+    i2 = forms.second_invariant(surf_q, "noncanonical", system)
+    return (abs(i1.value - I1_0) / abs(I1_0), abs(i2.value - I2_0) / abs(I2_0), bool(i1.under_resolved or i2.under_resolved))
+
+
+INV_PAIRS = [("GLRK1", "none"), ("GLRK1", "symmetric"), ("GLRK1", "midpoint"), ("GLRK2", "none"),
+             ("GLRK2", "standard"), ("GLRK2", "symmetric"), ("GLRK2", "symplectic"), ("SRK3", "symmetric"),
+             ("GLRK4", "symmetric")]
+
+
+def invariants(args):
+    DATA.mkdir(parents=True, exist_ok=True)
+    system = integrators.system("guiding_centre_symmetric")
+    loop_q = samples.loop(n=1000)
+    surf_q = samples.surface(n_sigma=32, n_tau=32)
+    ns = surf_q.shape[:2]
+    q0 = np.concatenate([loop_q, surf_q.reshape(-1, 4)])
+    I1_0 = forms.first_invariant(loop_q, "noncanonical", system).value
+    I2_0 = forms.second_invariant(surf_q, "noncanonical", system).value
+    h, steps = 10.0, args.steps
+    T = h * steps
+    split = lambda q: (q[:1000], q[1000:].reshape(ns + (4,)))
+    exact = invariant_errors(system, *split(system.exact_flow(q0, T)), I1_0, I2_0)
+    out = {"meta": dict(machine=platform.platform(), python=platform.python_version(), loop=1000,
+                        surface=list(ns), h=h, steps=steps, T=T, exact_flow=exact), "runs": []}
+    print("exact flow", exact, flush=True)
+    pairs = [tuple(p.split(":")) for p in args.pairs] if args.pairs else INV_PAIRS
+    for tab, proj in pairs:
+        t0 = time.perf_counter()
+        sol = integrate(system, q0, tab, proj, h, steps=steps, save_every=steps)
+        wall = time.perf_counter() - t0
+        broke = int(np.isfinite(sol.breakdown_time).sum())
+        e1, e2, under = invariant_errors(system, *split(sol.q[-1]), I1_0, I2_0)
+        out["runs"].append(dict(method=f"{tab}-{proj}", wall=wall, I1=e1, I2=e2, under_resolved=under, broke=broke))
+        print(out["runs"][-1], flush=True)
+        (DATA / "invariants.json").write_text(json.dumps(out, indent=0))
+    for method, tols in (("DOP853", [1e-6, 1e-8, 1e-10, 1e-12]), ("Radau", [1e-6, 1e-8, 1e-10])):
+        for tol in tols:
+            q, wall, nfev = scipy_solve(system, q0, T, method, tol)
+            e1, e2, under = (None, None, None) if q is None else invariant_errors(system, *split(q), I1_0, I2_0)
+            out["runs"].append(dict(method=method, tol=tol, wall=wall, I1=e1, I2=e2, under_resolved=under, nfev=nfev))
+            print(out["runs"][-1], flush=True)
+            (DATA / "invariants.json").write_text(json.dumps(out, indent=0))
+
+
+FAMILY = {"GLRK": "tab:blue", "SRK3": "tab:green", "LobIIID": "tab:purple", "LobIIIE": "tab:pink",
+          "LobIII": "tab:gray", "RadIIA": "tab:brown"}
+MARK = {"none": "o", "standard": "s", "symmetric": "^", "symplectic": "D", "midpoint": "v"}
+
+
+def colour(tab):
+    for k, c in FAMILY.items():
+        if tab.startswith(k):
+            return c
+    return "k"
+
+
+def plot(args):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    data = {n: json.loads((DATA / f"{n}.json").read_text()) for n in SYSTEMS if (DATA / f"{n}.json").exists()}
+    names = list(data)
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8.5))
+    for ax, name in zip(axes.ravel(), names):
+        runs = data[name]["runs"]
+        by = {}
+        for r in runs:
+            by.setdefault(r["method"], []).append(r)
+        for m, rs in by.items():
+            rs = [r for r in rs if r["error"] is not None]
+            if not rs:
+                continue
+            x, y = [r["wall"] for r in rs], [max(r["error"], 1e-17) for r in rs]
+            if m in ("DOP853", "Radau"):
+                ax.loglog(x, y, "-", color="red" if m == "DOP853" else "orange", lw=2.2, marker="*", ms=7, label=m, zorder=5)
+            else:
+                tab, proj = rs[0]["tableau"], rs[0]["projection"]
+                ax.loglog(x, y, "-", color=colour(tab), lw=0.6, marker=MARK[proj], ms=3, alpha=0.6)
+        ax.axhline(max(data[name]["reference_check"], 1e-17), color="k", ls=":", lw=1)
+        ax.set_title(f"{name}, T = {data[name]['T']:g}")
+        ax.set_xlabel("wall time [s] (16 points)")
+        ax.set_ylabel("max relative error at T")
+        ax.grid(True, which="major", alpha=0.3)
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], color=c, label=k) for k, c in FAMILY.items()]
+    handles += [Line2D([], [], color="k", ls="", marker=mk, label=p) for p, mk in MARK.items()]
+    handles += [Line2D([], [], color="red", lw=2.2, marker="*", label="scipy DOP853"),
+                Line2D([], [], color="orange", lw=2.2, marker="*", label="scipy Radau")]
+    fig.legend(handles=handles, loc="lower center", ncol=7, fontsize=8)
+    fig.suptitle("Work–precision: every tableau × projection at h₀, h₀/2, h₀/4 (lower left is better)")
+    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
+    fig.savefig(FIG / "work_precision.png", dpi=80)
+    plt.close(fig)
+    p = DATA / "invariants.json"
+    if p.exists():
+        inv = json.loads(p.read_text())
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+        for ax, key in zip(axes, ("I1", "I2")):
+            for r in inv["runs"]:
+                if r[key] is None:
+                    continue
+                sc = r["method"] in ("DOP853", "Radau")
+                c = ("red" if r["method"] == "DOP853" else "orange") if sc else colour(r["method"].split("-")[0])
+                mk = "*" if sc else MARK[r["method"].split("-")[1]]
+                ax.loglog(r["wall"], max(r[key], 1e-17), mk, color=c, ms=8 if sc else 6)
+                label = f"{r['tol']:.0e}" if sc else r["method"]
+                ax.annotate(label, (r["wall"], max(r[key], 1e-17)), fontsize=6, xytext=(3, 2), textcoords="offset points")
+            ax.set_xlabel("wall time [s]")
+            ax.set_ylabel(f"|{key}(T) − {key}(0)| / |{key}(0)|, noncanonical")
+            ax.grid(True, alpha=0.3)
+        m = inv["meta"]
+        fig.suptitle(f"guiding_centre_symmetric, {m['steps']} steps of h = {m['h']:g} (T = {m['T']:g}), "
+                     f"loop {m['loop']} points, surface {m['surface'][0]}×{m['surface'][1]}")
+        fig.tight_layout()
+        fig.savefig(FIG / "work_precision_invariants.png", dpi=80)
+        plt.close(fig)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("trajectory")
+    t.add_argument("--systems", nargs="+", default=list(SYSTEMS))
+    i = sub.add_parser("invariants")
+    i.add_argument("--steps", type=int, default=10000)
+    i.add_argument("--pairs", nargs="+")
+    sub.add_parser("plot")
+    args = ap.parse_args()
+    {"trajectory": trajectory, "invariants": invariants, "plot": plot}[args.cmd](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
