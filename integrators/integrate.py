@@ -127,14 +127,24 @@ def _commit(state, idx, ok, new):
     state.steps[good] += 1
 
 
-def advance(stepper: Stepper, state: State, t_next: float):
-    """Advance every live point of ``state`` by one step (in place).
+CHUNK = 20000    # points advanced together; larger batches spill out of the cache (docs/benchmarks.md)
+
+
+def advance(stepper: Stepper, state: State, t_next: float, chunk: int = CHUNK):
+    """Advance every live point of ``state`` by one step (in place), ``chunk`` points at a time.
 
     A point whose step fails from the extrapolated guess (and the last step's Jacobian) is
     tried once more from the vector-field guess h·q̇(q_n) and a fresh Jacobian before it is
-    declared broken down.
+    declared broken down.  The chunking changes no bits (a point's step does not depend on its
+    batch); it keeps the working arrays small: at 200,000 points one batch runs at 99k
+    point-steps/s, chunks of 20,000 at 136k.
     """
-    idx = np.flatnonzero(state.live)
+    live = np.flatnonzero(state.live)
+    for k in range(0, live.size, chunk):
+        _advance(stepper, state, live[k:k + chunk], t_next)
+
+
+def _advance(stepper, state, idx, t_next):
     if idx.size == 0:
         return
     fresh = ~state.have_history[idx]
