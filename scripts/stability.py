@@ -81,6 +81,11 @@ def envelope(steps_at, err):
     return ends, maxima
 
 
+def _3(x):
+    """Three significant digits (the JSON lines stay small)."""
+    return float(f"{x:.3g}")
+
+
 def run_one(case, tab, proj, steps):
     system, q0, h = case_setup(case)
     every = max(1, steps // SAMPLES)
@@ -102,7 +107,7 @@ def run_one(case, tab, proj, steps):
     H = system.H(q)
     rec = dict(case=case, tableau=tab, projection=proj, h=h, steps=steps, every=every,
                status="broke down" if broke else "completed", breakdown_step=taken + 1 if broke else None,
-               wall_s=wall, newton_per_step=sol.mean_newton_iterations)
+               wall_s=round(wall, 2), newton_per_step=round(sol.mean_newton_iterations, 3))
     errs = {"energy": np.abs(H - H[0]) / abs(H[0])}
     if system.has_momentum:
         P = system.momentum(q)
@@ -112,7 +117,7 @@ def run_one(case, tab, proj, steps):
     for key, e in errs.items():
         e = np.where(np.isfinite(e), e, np.inf)
         ends, maxima = envelope(steps_at, e)
-        rec[key] = dict(max=float(e.max()), final=float(e[-1]), envelope_steps=ends, envelope=maxima)
+        rec[key] = dict(max=_3(e.max()), final=_3(e[-1]), envelope_steps=ends, envelope=[_3(v) for v in maxima])
     return rec
 
 
@@ -139,18 +144,26 @@ def cmd_run(args):
                 continue
             rec = run_one(case, tab, proj, args.steps)
             with out.open("a") as f:
-                f.write(json.dumps(rec) + "\n")
+                f.write(json.dumps(rec, separators=(",", ":")) + "\n")
             e = rec["energy"]["max"]
             print(f"{case:24s} {tab:9s} {proj:10s} {rec['status']:10s} "
                   f"{'' if rec['breakdown_step'] is None else rec['breakdown_step']:>8} max|ΔH/H| {e:8.1e} "
                   f"{rec['wall_s']:7.1f} s", flush=True)
 
 
+def growing(e, steps):
+    """True when the energy error grows: its largest value in the last window of steps is more
+    than 10× its largest value over the first tenth of the run."""
+    ends, env = np.array(e["envelope_steps"]), np.array(e["envelope"])
+    early = env[ends <= steps / 10]
+    return bool(early.size and env[-1] > 10 * max(early.max(), 1e-16))
+
+
 def fmt(r):
-    """One table cell: max energy error of a completed run, or the breakdown step."""
+    """One table cell: max energy error of a completed run (↗: growing), or the breakdown step."""
     if r["status"] == "completed":
-        e = r["energy"]["max"]
-        return f"{e:.0e}"
+        e = r["energy"]
+        return f"{e['max']:.0e}" + (" ↗" if growing(e, r["steps"]) else "")
     return f"✗ {r['breakdown_step']}"
 
 
@@ -168,7 +181,7 @@ def cmd_report(args):
             continue
         stepcounts = sorted({v["steps"] for v in rows.values()})
         print(f"\n#### {case} (steps: {', '.join(f'{s:,}' for s in stepcounts)}; "
-              f"cell: largest |ΔH|/|H₀| of a completed run, or ✗ and the step it broke down at)\n")
+              f"cell: largest |ΔH|/|H₀| of a completed run, ↗ where it grows by more than 10× after the first tenth of the run, or ✗ and the step it broke down at)\n")
         print("| tableau | " + " | ".join(PROJECTIONS) + " |")
         print("|---|" + "---|" * len(PROJECTIONS))
         for tab in TABLEAU_NAMES:
@@ -182,32 +195,37 @@ def cmd_report(args):
 
 
 def plot_case(case, rows, path):
+    """Energy (top) and momentum (bottom, when the system has one) error envelopes, one panel per projection."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     projs = [p for p in PROJECTIONS if any(k[2] == p for k in rows)]
-    fig, axes = plt.subplots(1, len(projs), figsize=(3.6 * len(projs), 3.4), sharey=True, squeeze=False)
+    keys = ["energy"] + (["momentum"] if any("momentum" in r for r in rows.values()) else [])
+    fig, axes = plt.subplots(len(keys), len(projs), figsize=(3.4 * len(projs), 3.0 * len(keys)), sharey="row",
+                             squeeze=False)
     cmap = plt.get_cmap("tab20")
     handles = {}
-    for ax, proj in zip(axes[0], projs):
-        for i, tab in enumerate(TABLEAU_NAMES):
-            r = rows.get((case, tab, proj))
-            if r is None:
-                continue
-            e = r["energy"]
-            x, y = np.array(e["envelope_steps"]), np.maximum(np.array(e["envelope"]), 1e-17)
-            handles[tab] = ax.loglog(x, y, color=cmap(i % 20), lw=1, label=tab)[0]
-            if r["status"] != "completed" and len(x):
-                ax.plot(x[-1], min(y[-1], 1e3), "x", color=cmap(i % 20), ms=5)
-        ax.set_title(proj)
+    for row, key in zip(axes, keys):
+        for ax, proj in zip(row, projs):
+            for i, tab in enumerate(TABLEAU_NAMES):
+                r = rows.get((case, tab, proj))
+                if r is None or key not in r:
+                    continue
+                e = r[key]
+                x, y = np.array(e["envelope_steps"]), np.clip(np.array(e["envelope"]), 1e-17, 1e3)
+                handles[tab] = ax.loglog(x, y, color=cmap(i % 20), lw=1, label=tab)[0]
+                if r["status"] != "completed" and len(x):
+                    ax.plot(x[-1], y[-1], "x", color=cmap(i % 20), ms=5)
+            ax.set_title(f"{proj}: {key}", fontsize=9)
+            ax.set_ylim(1e-17, 1e3)
+        row[0].set_ylabel(f"max |Δ{'H' if key == 'energy' else 'P'}|/|{'H' if key == 'energy' else 'P'}₀| in window")
+    for ax in axes[-1]:
         ax.set_xlabel("step")
-        ax.set_ylim(1e-17, 1e3)
-    axes[0][0].set_ylabel("max |H − H₀|/|H₀| in window")
     order = [t for t in TABLEAU_NAMES if t in handles]
     fig.legend([handles[t] for t in order], order, loc="center right", fontsize=7)
-    fig.suptitle(f"{case}: energy error envelopes (× = broke down)")
-    fig.tight_layout(rect=(0, 0, 0.9, 1))
-    fig.savefig(path, dpi=80)
+    fig.suptitle(f"{case}: error envelopes (× = broke down)")
+    fig.tight_layout(rect=(0, 0, 0.91, 1))
+    fig.savefig(path, dpi=72)
     plt.close(fig)
 
 
