@@ -35,6 +35,7 @@ import integrators
 from integrators import PROJECTIONS, TABLEAU_NAMES
 from integrators.integrate import integrate
 from invariants import forms, samples
+from stability import all_pairs as admissible_pairs    # scripts/stability.py: every pair a tableau admits
 
 ROOT = Path(__file__).resolve().parents[1]
 FIG = ROOT / "docs" / "figures"
@@ -49,17 +50,6 @@ SYSTEMS = {   # name: (system, centre, spread, h0)
 }
 DOP_TOLS = [1e-3, 1e-5, 1e-7, 1e-9, 1e-11, 1e-12]    # 1e-13 is the reference
 RADAU_TOLS = [1e-3, 1e-5, 1e-7, 1e-9, 1e-11]
-
-
-def admissible_pairs():
-    out = []
-    for name in TABLEAU_NAMES:
-        tab = integrators.tableau(name)
-        for proj in PROJECTIONS:
-            if proj in ("symmetric", "symplectic", "midpoint") and abs(tab.R_inf) != 1.0:
-                continue
-            out.append((name, proj))
-    return out
 
 
 def scipy_solve(system, q0, T, method, tol):
