@@ -1,8 +1,8 @@
 """The batch-run driver: every (tableau, projection) pair of a scene, distributed over MPI ranks.
 
 The sample points (loop first, then the surface row by row) are split into contiguous
-blocks, one per rank; from the second pair on, rank 0's block is smaller by the measured
-cost of its output work (see ``_split``).  Each rank advances its block with each pair; at every output
+blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
+advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank advances its block with each pair; at every output
 time rank 0 gathers the points, computes the invariants and diagnostics and appends
 one row to the HDF5 file (see :mod:`integrators.output`), plus a checkpoint of the
 full integrator state.  Because a point's trajectory does not depend on its batch,
@@ -88,27 +88,40 @@ class Progress:
         sys.stderr.flush()
 
 
-def _split(n, size, offload=0.0):
+def _split(n, size, offload=0.0, speed=None):
     """Contiguous blocks of n points, one per rank: [(lo, hi), ...].
 
-    Rank 0 also gathers, computes the invariants and writes the file at every output; it
-    takes ``offload`` points fewer than the other ranks, so that everyone reaches the next
-    output at the same time (rank 0: c·n₀ + S = c·n_r for the others, offload = S/c).  Its
-    block never drops below a quarter of an even share.  Any split gives the same numbers:
-    a point's trajectory does not depend on its batch.
+    Rank 0 also gathers, computes the invariants and writes the file at every output.  With
+    ``speed[r]`` rank r's points per second (measured on the previous pair; equal if None) and
+    ``offload`` rank 0's output work in its own points' worth (S/c₀), every rank reaches the next
+    output at the same time T: c₀·n₀ + S = c_r·n_r = T with Σ n_r = n, i.e.
+    n_r ∝ speed[r] and n₀ = (n + offload)·speed[0]/Σ speed − offload.  Rank 0's block never
+    drops below a quarter of an even share, and no rank's speed counts as more than twice or
+    less than half the median (a noisy pair must not starve a rank).  Any split gives the same numbers: a point's
+    trajectory does not depend on its batch.
     """
     if size == 1:
         return [(0, n)]
-    n0 = max((n - (size - 1) * offload) / size, n / (4 * size))
-    bounds = np.concatenate([[0], np.linspace(min(n0, n / size), n, size).round()]).astype(int)
+    w = np.ones(size) if speed is None else np.asarray(speed, dtype=float)
+    if w.shape != (size,) or not np.all(np.isfinite(w) & (w > 0)):
+        w = np.ones(size)
+    w = np.clip(w, np.median(w) / 2, np.median(w) * 2)     # one noisy measurement must not starve a rank
+    w = w / w.sum()
+    n0 = min(max((n + offload) * w[0] - offload, n / (4 * size)), n)
+    rest = np.cumsum(w[1:]) / w[1:].sum() * (n - n0)          # ends of ranks 1.. after n0
+    bounds = np.concatenate([[0.0, n0], n0 + rest]).round().astype(int)
+    bounds[-1] = n
     return [(int(bounds[k]), int(bounds[k + 1])) for k in range(size)]
 
 
-def _offload(clock, n0):
-    """Rank 0's output work in points' worth of advance (S/c) from one pair's clock."""
-    if n0 == 0 or clock["advance"] <= 0.0:
-        return 0.0
-    return (clock["invariants"] + clock["hdf5"]) / (clock["advance"] / n0)
+def _balance(stats, clock):
+    """(offload, speed) for the next pair's ``_split`` from this pair's per-rank (advance s, points)."""
+    speed = [pts / adv if adv > 0 and pts > 0 else np.nan for adv, pts in stats]
+    adv0, n0 = stats[0]
+    if n0 == 0 or adv0 <= 0.0:
+        return 0.0, None
+    offload = (clock["invariants"] + clock["hdf5"]) / (adv0 / n0)
+    return offload, (speed if np.all(np.isfinite(speed)) else None)
 
 
 def _state_dict(st: State):
@@ -197,7 +210,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     pts = [a.reshape(-1, system.d) for a in (scene.loop_points(), scene.surface_points()) if a is not None]
     q0 = np.concatenate(pts)
     n = q0.shape[0]
-    offload = 0.0          # rebalanced after every pair from rank 0's measured output work
+    offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
     h = scene.h
     n_out = scene.n_outputs
 
@@ -242,7 +255,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         start_step, saved = job
         tab = builtin_tableau(tab_name)
         stepper = Stepper(system, tab, proj, h)
-        blocks = comm.bcast(_split(n, size, offload) if rank == 0 else None, root=0)
+        blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
         lo, hi = blocks[rank]
         if saved is None:
             st = State(q0[lo:hi], system.theta(q0[lo:hi]), np.zeros((hi - lo, system.d)), h, tab.s)
@@ -266,9 +279,9 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             if rank == 0:
                 bar.update(1, name)
         timings[name] = clock
+        stats = comm.gather((clock["advance"], hi - lo), root=0)
         if rank == 0:
-            offload = _offload(clock, hi - lo)
-        if rank == 0:
+            offload, speed = _balance(stats, clock)
             g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
             f.flush()
     comm.Barrier()

@@ -19,6 +19,12 @@ D. ``--scale``: throughput at scale, a loop of 10³ (baseline), 10⁵ and 10⁶ 
    peak resident memory per point ((peak − peak of the 10³-point run) / points); written to
    docs/figures/benchmark_scale.json.
 
+E. ``--contention``: what two busy cores cost each other on this machine.  The paper scene cut to
+   ``--steps`` steps runs as one serial process alone, then as two identical serial processes
+   started together, ``--repeat`` times alternately; no MPI, no communication.  The ceiling of
+   any 2-rank speed-up here is 2 · T_alone / T_together; written to
+   docs/figures/benchmark_contention.json.
+
 Each measurement is a child process: ``[mpiexec -n K] python scripts/benchmark_service.py
 --child SCENE OUT``, which runs the driver and prints one JSON line from rank 0.
 """
@@ -79,15 +85,57 @@ def child(scene_path, out):
         print(json.dumps(dict(wall=wall, ranks=comm.size, peak_rss_mib=rss_all, phases=phases)))
 
 
-def measure(text, ranks, tmp, out_name="out.h5"):
-    path = Path(tmp) / "scene.toml"
+def _command(text, ranks, tmp, out_name):
+    path = Path(tmp) / f"{out_name}.toml"
     path.write_text(text)
     cmd = [sys.executable, __file__, "--child", str(path), str(Path(tmp) / out_name)]
     if ranks > 1:
         mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
         cmd = [mpiexec, "-n", str(ranks)] + cmd
-    r = subprocess.run(cmd, capture_output=True, text=True, check=True)
-    return json.loads(r.stdout.strip().splitlines()[-1])
+    return cmd
+
+
+def _result(stdout):
+    return json.loads(stdout.strip().splitlines()[-1])
+
+
+def measure(text, ranks, tmp, out_name="out.h5"):
+    r = subprocess.run(_command(text, ranks, tmp, out_name), capture_output=True, text=True, check=True)
+    return _result(r.stdout)
+
+
+def measure_together(text, copies, tmp):
+    """``copies`` identical serial runs started at once; their results in start order."""
+    procs = [subprocess.Popen(_command(text, 1, tmp, f"c{k}.h5"), stdout=subprocess.PIPE, text=True)
+             for k in range(copies)]
+    outs = [p.communicate()[0] for p in procs]
+    if any(p.returncode for p in procs):
+        raise RuntimeError("a concurrent child failed")
+    return [_result(o) for o in outs]
+
+
+def contention(out, steps, repeat):
+    """One serial paper-scene run alone against two run together (see E in the module docstring)."""
+    import statistics
+    paper = dict(tableaus=("GLRK1", "GLRK2", "SRK3"),
+                 projections=("none", "standard", "symmetric", "symplectic", "midpoint"))
+    text = scene_text("p", steps, **paper)
+    res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=steps,
+                        scene="paper_poincare cut to --steps steps", repeat=repeat), "alone": [], "together": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(repeat):
+            res["alone"].append(measure(text, 1, tmp))
+            print("alone", res["alone"][-1], flush=True)
+            res["together"].append(measure_together(text, 2, tmp))
+            print("together", res["together"][-1], flush=True)
+    t1 = statistics.median(r["wall"] for r in res["alone"])
+    t2 = statistics.median(max(a["wall"], b["wall"]) for a, b in res["together"])
+    adv1 = statistics.median(r["phases"]["advance"] for r in res["alone"])
+    adv2 = statistics.median(sum(x["phases"]["advance"] for x in pair) / 2 for pair in res["together"])
+    res["summary"] = dict(wall_alone=t1, wall_together=t2, slowdown=t2 / t1, ceiling_2_ranks=2 * t1 / t2,
+                          advance_alone=adv1, advance_together=adv2, advance_slowdown=adv2 / adv1)
+    print(json.dumps(res["summary"]), flush=True)
+    Path(out).write_text(json.dumps(res, indent=1))
 
 
 def identical_files(a, b):
@@ -151,11 +199,15 @@ def main():
     ap.add_argument("--scale", action="store_true", help="10^5 and 10^6 loop points on 1 and 2 ranks")
     ap.add_argument("--paper", action="store_true", help="the full paper scene on 1 and 2 ranks (about 30 min)")
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2], help="rank counts for --paper")
+    ap.add_argument("--contention", action="store_true", help="one serial run alone against two together")
+    ap.add_argument("--repeat", type=int, default=2, help="rounds for --contention")
     args = ap.parse_args()
     if args.child:
         return child(*args.child)
     if args.scale:
         return scale(ROOT / "docs" / "figures" / "benchmark_scale.json")
+    if args.contention:
+        return contention(ROOT / "docs" / "figures" / "benchmark_contention.json", args.steps, args.repeat)
     if args.paper:
         return paper_experiment(ROOT / "docs" / "figures" / "benchmark_paper_mpi.json", args.ranks)
     res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=args.steps)}

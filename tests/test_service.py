@@ -245,3 +245,26 @@ def test_split_gives_rank0_less_work_by_its_output_cost():
     # a huge output cost leaves rank 0 a quarter of an even share, not nothing
     assert _split(1000, 2, 1e9)[0] == (0, 125)
     assert _split(5, 1, 3.0) == [(0, 5)]
+
+
+def test_split_by_measured_speed_makes_every_rank_finish_together():
+    from integrators.driver import _balance, _split
+    rng = np.random.default_rng(3)
+    for size in (2, 3, 5):
+        for _ in range(20):
+            n = int(rng.integers(1000, 50000))
+            c = rng.uniform(1.0, 1.9, size) * 1e-4              # seconds per point, within 2x of each other
+            S = rng.uniform(0.0, 0.05) * c[0] * n / size        # rank 0's output seconds
+            blocks = _split(n, size, S / c[0], 1 / c)
+            sizes = np.array([hi - lo for lo, hi in blocks])
+            assert blocks[0][0] == 0 and blocks[-1][1] == n and sizes.sum() == n
+            finish = c * sizes + np.r_[S, np.zeros(size - 1)]
+            # equal finishing times up to one point's rounding on each side
+            assert np.ptp(finish) <= 2 * c.max() + 1e-12
+    # _balance turns one pair's per-rank (advance seconds, points) into the same inputs
+    clock = {"advance": 6.0, "gather": 0.3, "invariants": 0.5, "hdf5": 0.1}
+    off, speed = _balance([(6.0, 3000), (9.0, 3000)], clock)
+    assert off == 0.6 / (6.0 / 3000) and speed == [500.0, 1000.0 / 3]
+    assert _balance([(6.0, 3000), (0.0, 0)], clock)[1] is None           # a rank without points: even speeds
+    # a wildly slow measurement counts as half the median speed, not less
+    assert _split(9000, 3, 0.0, [1.0, 1.0, 1e-6]) == _split(9000, 3, 0.0, [1.0, 1.0, 0.5])
