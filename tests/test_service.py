@@ -268,3 +268,47 @@ def test_split_by_measured_speed_makes_every_rank_finish_together():
     assert _balance([(6.0, 3000), (0.0, 0)], clock)[1] is None           # a rank without points: even speeds
     # a wildly slow measurement counts as half the median speed, not less
     assert _split(9000, 3, 0.0, [1.0, 1.0, 1e-6]) == _split(9000, 3, 0.0, [1.0, 1.0, 0.5])
+
+
+def test_rebalance_moves_points_only_when_the_split_changes():
+    """Rank 0's side of a re-split at an output: the new block is the gathered state's slice."""
+    import integrators
+    from integrators.driver import _rebalance, _split, _state_dict
+    from integrators.integrate import State
+
+    class TwoRanks:                                      # rank 0 of two; rank 1 reports `other`
+        rank, size = 0, 2
+
+        def __init__(self, other):
+            self.other, self.sent = other, None
+
+        def gather(self, obj, root=0):
+            return [obj, self.other]
+
+        def bcast(self, obj, root=0):
+            return obj
+
+        def scatter(self, objs, root=0):
+            self.sent = objs
+            return objs[0]
+
+    system = integrators.system("lotka_volterra_2d")
+    n, h, s = 1000, 0.1, 2
+    q = 1.0 + np.random.default_rng(0).uniform(0.0, 1.0, (n, 2))
+    full_state = State(q, system.theta(q), np.zeros((n, 2)), h, s)
+    full_state.steps[:] = np.arange(n)
+    full = _state_dict(full_state)
+    blocks = [(0, 500), (500, 1000)]
+    mine = State(q[:500], system.theta(q[:500]), np.zeros((500, 2)), h, s)
+    since = {"advance": 1.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
+    # rank 1 as fast as rank 0, no output cost: the split stands and nothing is sent
+    comm = TwoRanks((1.0, 500))
+    st, new = _rebalance(comm, mine, full, since, blocks, n, h, s)
+    assert st is mine and new == blocks and comm.sent is None
+    # rank 1 twice as fast: rank 0 keeps a third of the points, taken from the gathered state
+    comm = TwoRanks((0.5, 500))
+    st, new = _rebalance(comm, mine, full, since, blocks, n, h, s)
+    assert new == _split(n, 2, 0.0, [500.0, 1000.0]) == [(0, 333), (333, 1000)]
+    assert np.array_equal(st.q, q[:333]) and np.array_equal(st.steps, np.arange(333))
+    assert [len(p["q"]) for p in comm.sent] == [333, 667]
+    assert np.array_equal(comm.sent[1]["steps"], np.arange(333, 1000))
