@@ -2,8 +2,7 @@
 
 The sample points (loop first, then the surface row by row) are split into contiguous
 blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
-advance rate and rank 0's is smaller by the cost of its output work (see ``_split``), and once
-per pair, about a tenth of the way in, they are re-sized by that pair's own rates (``_rebalance``).  Each rank advances its block with each pair; at every output
+advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank advances its block with each pair; at every output
 time rank 0 gathers the points, computes the invariants and diagnostics and appends
 one row to the HDF5 file (see :mod:`integrators.output`), plus a checkpoint of the
 full integrator state.  Because a point's trajectory does not depend on its batch,
@@ -36,9 +35,6 @@ class _Serial:
 
     def bcast(self, obj, root=0):
         return obj
-
-    def scatter(self, objs, root=0):
-        return objs[0]
 
     def Barrier(self):
         pass
@@ -126,31 +122,6 @@ def _balance(stats, clock):
         return 0.0, None
     offload = (clock["invariants"] + clock["hdf5"]) / (adv0 / n0)
     return offload, (speed if np.all(np.isfinite(speed)) else None)
-
-
-def _since(clock, mark):
-    """The phase times accumulated since ``mark`` (a copy of ``clock`` taken earlier)."""
-    return {k: clock[k] - mark[k] for k in clock}
-
-
-def _rebalance(comm, st, full, since, blocks, n, h, s):
-    """Re-split the points at an output by the rates measured in this pair so far: (state, blocks).
-
-    ``since``: this rank's phase times over the measured stretch; ``full``: the gathered state
-    (rank 0).  Every output is a checkpoint (Jacobians are forgotten there), so a point restarted
-    from the gathered state continues bitwise as it would have on its old rank.  Nothing moves
-    unless some block boundary moves by more than 1 % of an even share.
-    """
-    lo, hi = blocks[comm.rank]
-    stats = comm.gather((since["advance"], hi - lo), root=0)
-    new = _split(n, comm.size, *_balance(stats, since)) if comm.rank == 0 else None
-    new = comm.bcast(new, root=0)
-    if max(abs(a[1] - b[1]) for a, b in zip(new, blocks)) <= n // (100 * comm.size):
-        return st, blocks
-    parts = [{k: v[a:b] for k, v in full.items()} for a, b in new] if comm.rank == 0 else None
-    part = comm.scatter(parts, root=0)
-    lo, hi = new[comm.rank]
-    return _state_from(part, 0, hi - lo, h, s), new
 
 
 def _state_dict(st: State):
@@ -297,10 +268,6 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
         if start_step == 0:
             _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
-        mark = dict(clock)          # rates are measured from here: after the initial output
-        # once per pair, about a tenth of the way in, the blocks are re-sized by this pair's own rates
-        settle = start_step + max(scene.output_every, (scene.steps - start_step) // 10)
-        resplit = size > 1
         for step in range(start_step + 1, scene.steps + 1):
             t0 = time.perf_counter()
             advance(stepper, st, step * h)
@@ -308,21 +275,13 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             if step % scene.output_every == 0:
                 if rank == 0:
                     g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
-                full = _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
-                if resplit and settle <= step < scene.steps:
-                    resplit = False
-                    t0 = time.perf_counter()
-                    st, blocks = _rebalance(comm, st, full, _since(clock, mark), blocks, n, h, tab.s)
-                    lo, hi = blocks[rank]
-                    clock["gather"] += time.perf_counter() - t0
-                    mark = dict(clock)
+                _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
             if rank == 0:
                 bar.update(1, name)
         timings[name] = clock
-        since = _since(clock, mark)
-        stats = comm.gather((since["advance"], hi - lo), root=0)
+        stats = comm.gather((clock["advance"], hi - lo), root=0)
         if rank == 0:
-            offload, speed = _balance(stats, since)
+            offload, speed = _balance(stats, clock)
             g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
             f.flush()
     comm.Barrier()
@@ -363,7 +322,7 @@ def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, 
     parts = comm.gather(_state_dict(st), root=0)
     if comm.rank != 0:
         clock["gather"] += time.perf_counter() - t0
-        return None
+        return
     full = _concat(parts)
     t1 = time.perf_counter()
     clock["gather"] += t1 - t0
@@ -383,7 +342,6 @@ def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, 
     clock["hdf5"] += time.perf_counter() - t2
     if after_output is not None:
         after_output(name, step)
-    return full
 
 
 def finalize(path, scene):
