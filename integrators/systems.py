@@ -25,40 +25,68 @@ from sympy.printing.numpy import NumPyPrinter
 
 
 class _Printer(NumPyPrinter):
-    """numpy printer that keeps parameters as names bound at compile time."""
+    """numpy printer that prints every symbol by the safe name it was given.
+
+    The generated code never sees a user's names: coordinates become ``_q0, _q1, …``, parameters
+    ``_k0, _k1, …`` and common subexpressions ``_x0, …`` (sympy Dummies, so a user symbol
+    spelled ``_x0`` cannot be mistaken for one), and numpy is reached as ``numpy.…`` only.  So a
+    coordinate called ``q``, ``out`` or ``np``, or a parameter called ``e``, ``pi``, ``sqrt`` or
+    ``lambda``, means exactly that symbol.
+    """
+
+    def __init__(self, names):
+        super().__init__({"fully_qualified_modules": True, "allow_unknown_functions": False})
+        self.names = names
 
     def _print_Symbol(self, expr):
-        return expr.name
+        try:
+            return self.names[expr]
+        except KeyError:
+            raise ValueError(f"no value for symbol '{expr}'") from None
+
+    _print_Dummy = _print_Symbol
 
 
 def _compile(exprs, shape, qsyms, params, name):
     """Compile sympy expressions into ``f(q) -> array of shape q.shape[:-1] + shape``."""
     flat = list(exprs)
-    subs, reduced = sympy.cse(flat, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
-    printer = _Printer({"fully_qualified_modules": False, "allow_unknown_functions": False})
-    lines = [f"def {name}(q):"]
-    lines.append("    q = np.asarray(q, dtype=np.result_type(q, np.float64))")
-    lines.append(f"    out = np.zeros(q.shape[:-1] + {tuple(shape)!r}, dtype=q.dtype)")
+    subs, reduced = sympy.cse(flat, symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
+                              optimizations="basic")
+    names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
+    names.update({k: f"_k{i}" for i, k in enumerate(params)})
+    names.update({sym: f"_x{i}" for i, (sym, _) in enumerate(subs)})
+    printer = _Printer(names)
+    lines = [f"def {name}(_qin):"]
+    lines.append("    _qin = numpy.asarray(_qin, dtype=numpy.result_type(_qin, numpy.float64))")
+    lines.append(f"    _out = numpy.zeros(_qin.shape[:-1] + {tuple(shape)!r}, dtype=_qin.dtype)")
     for i, s in enumerate(qsyms):
-        lines.append(f"    {s.name} = q[..., {i}]")
+        lines.append(f"    {names[s]} = _qin[..., {i}]")
     for sym, e in subs:
-        lines.append(f"    {sym.name} = {printer.doprint(e)}")
+        lines.append(f"    {names[sym]} = {printer.doprint(e)}")
     for idx, e in zip(itertools.product(*[range(n) for n in shape]), reduced):
         if e == 0:
             continue
         key = ", ".join(["..."] + [str(i) for i in idx])
-        lines.append(f"    out[{key}] = {printer.doprint(e)}")
-    lines.append("    return out")
+        lines.append(f"    _out[{key}] = {printer.doprint(e)}")
+    lines.append("    return _out")
     src = "\n".join(lines)
-    namespace = {"np": np, "numpy": np, **{k.name: float(v) for k, v in params.items()}}
-    for fn in ("sqrt", "log", "exp", "sin", "cos", "tan", "arctan2", "arctan", "sinh", "cosh", "tanh",
-               "arcsin", "arccos", "abs", "pi", "e", "sign", "power"):
-        namespace[fn] = getattr(np, fn)
-    namespace["absolute"] = np.absolute
+    namespace = {"numpy": np, **{names[k]: float(v) for k, v in params.items()}}
     exec(compile(src, f"<generated {name}>", "exec"), namespace)
     fn = namespace[name]
     fn.source = src
     return fn
+
+
+def _expr(x, where, known):
+    """A sympy expression from a sympy object or number, or from a string by the restricted parser
+    (integrators.expressions: never ``sympify`` of text, which would run it)."""
+    if isinstance(x, str):
+        from .expressions import parse_expression
+        return parse_expression(x, where, known)
+    try:
+        return sympy.sympify(x, strict=True)
+    except sympy.SympifyError:
+        raise ValueError(f"{where}: cannot use {x!r} as an expression") from None
 
 
 class System:
@@ -84,9 +112,10 @@ class System:
         self.d = len(self.q)
         if len(theta) != self.d:
             raise ValueError(f"system {name}: ϑ has {len(theta)} components for {self.d} coordinates")
-        self.theta_expr = tuple(sympy.sympify(t) for t in theta)
-        self.H_expr = sympy.sympify(H)
         self.params = dict(params or {})
+        known = {str(x): x for x in (*self.q, *self.params)}
+        self.theta_expr = tuple(_expr(t, f"system {name}: theta[{i}]", known) for i, t in enumerate(theta))
+        self.H_expr = _expr(H, f"system {name}: H", known)
         free = set().union(*(t.free_symbols for t in self.theta_expr), self.H_expr.free_symbols)
         unknown = free - set(self.q) - set(self.params)
         if unknown:
@@ -94,11 +123,12 @@ class System:
         for k, v in self.params.items():
             if not math.isfinite(float(v)):
                 raise ValueError(f"system {name}: parameter {k} = {v} is not finite")
-        self.symmetry = None if symmetry is None else tuple(sympy.sympify(v) for v in symmetry)
+        self.symmetry = (None if symmetry is None else
+                         tuple(_expr(v, f"system {name}: symmetry[{i}]", known) for i, v in enumerate(symmetry)))
         self.momentum_expr = (None if self.symmetry is None
                               else sympy.expand(sum(t * v for t, v in zip(self.theta_expr, self.symmetry))))
         self.momentum_name = momentum_name or ("P" if self.symmetry is not None else None)
-        self.domain_expr = tuple(sympy.sympify(g) for g in domain)
+        self.domain_expr = tuple(_expr(g, f"system {name}: domain[{i}]", known) for i, g in enumerate(domain))
         self.defaults = dict(defaults or {})
 
     # -- symbolic derivatives -------------------------------------------------

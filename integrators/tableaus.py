@@ -274,6 +274,12 @@ def make_tableau(name, a, b, c, *, abar=None, d=None, order=None, mp=None) -> Ta
     else:
         Ab = abar if hasattr(abar, 'rows') else mp.matrix([[mp.mpf(x) for x in row] for row in abar])
     dd = None if d is None else [mp.mpf(x) for x in d]
+    if dd is None and abs(mp.det(A)) < mp.mpf(10) ** -30:
+        raise ValueError(f"tableau {name}: a is singular (its velocity stages are linearly dependent, as in "
+                         "Lobatto IIIA/IIIB), so the stage equations need the constraint vector d of "
+                         "eq:vprk_lobatto: give d")
+    if dd is not None and len(dd) != s:
+        raise ValueError(f"tableau {name}: d must have s = {s} entries, got {len(dd)}")
     a_hi, a_lo = _split(mp, A)
     ab_hi, ab_lo = _split(mp, Ab)
     b_hi, b_lo = _split(mp, bb)
@@ -361,18 +367,12 @@ def tableau(name: str) -> Tableau:
 
 
 def _parse_number(mp, x, where):
-    if isinstance(x, (int, float)):
-        return mp.mpf(x) if isinstance(x, int) else mp.mpf(repr(x))
-    if isinstance(x, str):
-        import sympy
-        try:
-            e = sympy.sympify(x, rational=True)
-        except (sympy.SympifyError, SyntaxError, TypeError) as exc:
-            raise ValueError(f"{where}: cannot read number '{x}'") from exc
-        if not e.is_number:
-            raise ValueError(f"{where}: '{x}' is not a number")
-        return mp.mpf(str(sympy.N(e, _DPS + 5)))
-    raise ValueError(f"{where}: expected a number or a string like '1/2 - sqrt(15)/10', got {x!r}")
+    """An entry of a user tableau: a number, or a string read by the restricted parser
+    (:mod:`integrators.expressions`: numbers, + − × ÷, powers, sqrt and a few functions; no code runs)."""
+    from .expressions import parse_number
+    if isinstance(x, bool) or not isinstance(x, (int, float, str)):
+        raise ValueError(f"{where}: expected a number or a string like '1/2 - sqrt(15)/10', got {x!r}")
+    return mp.mpf(parse_number(x, where, _DPS + 5))
 
 
 def tableau_from_arrays(name, a, b, c, abar=None, d=None, order=None) -> Tableau:
@@ -410,5 +410,18 @@ def tableau_from_file(path) -> Tableau:
     for key in ("a", "b", "c"):
         if key not in data:
             raise ValueError(f"tableau file '{path}': missing key '{key}'")
-    return tableau_from_arrays(data.get("name", path.stem), data["a"], data["b"], data["c"],
-                               abar=data.get("abar"), d=data.get("d"), order=data.get("order"))
+    name = data.get("name", path.stem)
+    if not isinstance(name, str):
+        raise ValueError(f"tableau file '{path}': 'name' must be a string, got {name!r}")
+    for key, depth in (("a", 2), ("abar", 2), ("b", 1), ("c", 1), ("d", 1)):
+        v = data.get(key)
+        if v is not None and not (isinstance(v, list) and (depth == 1 or all(isinstance(r, list) for r in v))):
+            raise ValueError(f"tableau file '{path}': '{key}' must be a {'list of lists' if depth == 2 else 'list'}")
+    order = data.get("order")
+    if order is not None and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
+        raise ValueError(f"tableau file '{path}': 'order' must be a positive integer, got {order!r}")
+    try:
+        return tableau_from_arrays(name, data["a"], data["b"], data["c"], abar=data.get("abar"), d=data.get("d"),
+                                   order=order)
+    except ValueError as exc:
+        raise ValueError(f"tableau file '{path}': {exc}") from None

@@ -109,7 +109,7 @@ c = ["1/2 - sqrt(15)/10", "1/2", "1/2 + sqrt(15)/10"]
 @pytest.mark.parametrize("text,msg", [("a=[[1]]\nb=[1]\nc=[0]\nfoo=1", "unknown key 'foo'"),
                                       ("a=[[1]]\nb=[1]", "missing key 'c'"),
                                       ("a=[[1]]\nb=[0.5]\nc=[1]", "sum to 0.5"),
-                                      ("a=[['x']]\nb=[1]\nc=[1]", "not a number")])
+                                      ("a=[['x']]\nb=[1]\nc=[1]", "a\\[0\\]\\[0\\]: unknown name 'x'")])
 def test_bad_tableau_files(tmp_path, text, msg):
     f = tmp_path / "bad.toml"
     f.write_text(text)

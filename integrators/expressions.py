@@ -1,0 +1,135 @@
+"""A restricted parser for the expressions that data files carry (tableau entries, scene strings).
+
+Nothing read from a file is ever handed to ``eval``, ``exec`` or ``sympy.sympify``: the text is
+parsed by Python's :mod:`ast` (which builds a tree and runs nothing) and the tree is walked
+here, accepting only
+
+* numbers (integers are kept exact, so ``1/3`` is the rational 1/3, not a rounded float),
+* the operators ``+ − × ÷`` and powers (``**`` or ``^``), unary ``±``, parentheses,
+* the names the caller allows (coordinates and parameters of a system; none for a tableau),
+* the constants ``pi`` and ``E`` and the functions in :data:`FUNCTIONS`, unless a caller's
+  own name shadows them (a parameter called ``pi`` is that parameter).
+
+Anything else — attribute access, subscripts, calls of other names, lambdas, comprehensions,
+strings, keyword arguments — is an :class:`ExpressionError` that names the key it came from.
+Powers with a numeric exponent are limited to |exponent| ≤ :data:`MAX_EXPONENT` (and numeric powers
+to 2^:data:`MAX_BITS` in size) and the text
+to :data:`MAX_LENGTH` characters, so no file can make the parser compute for ever.
+"""
+from __future__ import annotations
+
+import ast
+
+import sympy
+
+MAX_LENGTH = 2000
+MAX_EXPONENT = 64
+MAX_BITS = 4096
+
+FUNCTIONS = {
+    "sqrt": sympy.sqrt, "exp": sympy.exp, "log": sympy.log, "sin": sympy.sin, "cos": sympy.cos,
+    "tan": sympy.tan, "asin": sympy.asin, "acos": sympy.acos, "atan": sympy.atan, "atan2": sympy.atan2,
+    "sinh": sympy.sinh, "cosh": sympy.cosh, "tanh": sympy.tanh, "abs": sympy.Abs, "Abs": sympy.Abs,
+    "Rational": sympy.Rational,
+}
+CONSTANTS = {"pi": sympy.pi, "E": sympy.E}
+
+
+class ExpressionError(ValueError):
+    """An expression that is not allowed or not well formed; the message names its key."""
+
+
+_BINARY = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+           ast.Div: lambda a, b: a / b, ast.Pow: None}
+
+
+def parse_expression(text, where: str, names: dict | None = None):
+    """The sympy expression of ``text``; ``names`` maps the allowed identifiers to sympy objects.
+
+    ``where`` is the key the text came from (e.g. ``"tableau.toml: a[0][2]"``); every error
+    message starts with it.
+    """
+    names = dict(names or {})
+    if isinstance(text, bool):
+        raise ExpressionError(f"{where}: expected a number or an expression, got {text!r}")
+    if isinstance(text, int):
+        return sympy.Integer(text)
+    if isinstance(text, float):
+        return sympy.Rational(repr(text)) if text == text and abs(text) != float("inf") else _bad(where, text)
+    if not isinstance(text, str):
+        raise ExpressionError(f"{where}: expected a number or an expression string, got {type(text).__name__}")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"{where}: expression longer than {MAX_LENGTH} characters")
+    try:
+        tree = ast.parse(text.strip().replace("^", "**"), mode="eval")     # x^2 is a power, as in sympy
+    except SyntaxError:
+        raise ExpressionError(f"{where}: cannot read '{text}' as an expression") from None
+    return _Walker(where, text, names).visit(tree.body)
+
+
+def _bad(where, text):
+    raise ExpressionError(f"{where}: '{text}' is not a finite number")
+
+
+class _Walker:
+    def __init__(self, where, text, names):
+        self.where, self.text, self.names = where, text, names
+
+    def fail(self, what):
+        raise ExpressionError(f"{self.where}: {what} is not allowed in '{self.text}' "
+                              "(numbers, + - * / **, parentheses and the documented functions only)")
+
+    def visit(self, node):
+        if isinstance(node, ast.Constant):
+            v = node.value
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                self.fail(f"the literal {v!r}")
+            return sympy.Integer(v) if isinstance(v, int) else sympy.Rational(repr(v))
+        if isinstance(node, ast.Name):
+            if node.id in self.names:
+                return self.names[node.id]
+            if node.id in CONSTANTS:
+                return CONSTANTS[node.id]
+            if node.id in FUNCTIONS:
+                self.fail(f"the function name '{node.id}' without a call")
+            allowed = sorted(self.names)
+            raise ExpressionError(f"{self.where}: unknown name '{node.id}' in '{self.text}'"
+                                  + (f" (known: {', '.join(allowed)})" if allowed else ""))
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.UAdd, ast.USub)):
+            v = self.visit(node.operand)
+            return -v if isinstance(node.op, ast.USub) else v
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
+            left, right = self.visit(node.left), self.visit(node.right)
+            if isinstance(node.op, ast.Pow):
+                if right.is_number and not (abs(right) <= MAX_EXPONENT):
+                    self.fail(f"the exponent {right}")
+                if left.is_number and right.is_number and left != 0 and \
+                        abs(float(sympy.N(sympy.log(abs(left), 2)))) * abs(float(sympy.N(right))) > MAX_BITS:
+                    self.fail(f"a numeric power larger than 2^{MAX_BITS}")
+                return left ** right
+            return _BINARY[type(node.op)](left, right)
+        if isinstance(node, ast.Call):
+            fn = node.func
+            if not isinstance(fn, ast.Name) or fn.id in self.names or fn.id not in FUNCTIONS:
+                self.fail(f"the call '{ast.unparse(fn)}(…)'")
+            if node.keywords:
+                self.fail("a keyword argument")
+            args = [self.visit(a) for a in node.args]
+            try:
+                return FUNCTIONS[fn.id](*args)
+            except (TypeError, ValueError) as exc:
+                raise ExpressionError(f"{self.where}: {fn.id}() in '{self.text}': {exc}") from None
+        self.fail(f"'{ast.unparse(node)}'")
+
+
+def parse_number(text, where: str, digits: int):
+    """A finite real number from ``text`` as an mpmath-ready decimal string of ``digits`` digits."""
+    e = parse_expression(text, where)
+    if not e.is_number:
+        raise ExpressionError(f"{where}: '{text}' is not a number")
+    if e.has(sympy.zoo, sympy.nan, sympy.oo, -sympy.oo) or e.is_finite is False:
+        raise ExpressionError(f"{where}: '{text}' is not a finite number (division by zero?)")
+    v = sympy.N(e, digits)
+    if not v.is_real or not v.is_finite:
+        raise ExpressionError(f"{where}: '{text}' is not a finite real number")
+    return str(v)
