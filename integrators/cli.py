@@ -2,29 +2,83 @@
 
     poincare run [SCENE] [-o OUT] [--resume] [--force]     (mpiexec -n K poincare run … to distribute)
     poincare audit CANDIDATE [--projection P …] [--scene SCENE] [--reference TAB-PROJ …] [--json F] [--plots DIR]
-    poincare scenes
+    poincare scenes [--keys]
     poincare plot OUT.h5 [-o DIR]
     poincare list tableaus|systems
+    poincare --version
 
-Bad input exits with status 2 and one line on stderr naming the problem.
+Exit status (README, "Statuses and exit codes"):
+
+    0    done, every pair `ok`
+    1    done, but some pair is `under-resolved`, `partial` or `failed` (the summary says which)
+    2    bad input (scene, options, files): one line on stderr naming the problem
+    3    the output could not be written (disk full, no permission): one line; what was flushed stays readable
+    130  interrupted by SIGINT (Ctrl-C), 143 by SIGTERM: one line saying how to resume
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
+import signal
 import sys
 
 import numpy as np
 
+EXIT_OK, EXIT_NOT_OK, EXIT_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
+
+
+class Terminated(BaseException):
+    """SIGTERM (what batch schedulers send), raised in the main thread like KeyboardInterrupt."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _rank() -> int:
+    """This process's MPI rank from the launcher's environment (0 when not under mpiexec)."""
+    for key in ("PMI_RANK", "OMPI_COMM_WORLD_RANK", "MPI_LOCALRANKID"):
+        if key in os.environ:
+            try:
+                return int(os.environ[key])
+            except ValueError:
+                pass
+    return 0
+
 
 def _print_summary(summaries, out):
     keys = sorted({k for s in summaries for k in s.max_errors})
-    head = f"{'pair':22s} {'status':8s} {'broke':>5s} " + " ".join(f"{k:>17s}" for k in keys) + f" {'wall [s]':>9s}"
-    print(f"\nwrote {out}\nmax relative invariant error |I(t) − I(0)|/|I(0)|:")
+    head = f"{'pair':22s} {'status':14s} {'broke':>5s} " + " ".join(f"{k:>17s}" for k in keys) + f" {'wall [s]':>9s}"
+    print(f"\nwrote {out}\nmax relative invariant error |I(t) − I(0)|/|I(0)| over the outputs where the set was resolved:")
     print(head)
+    notes = []
     for s in summaries:
-        errs = " ".join(f"{s.max_errors.get(k, np.nan):17.3e}" for k in keys)
-        print(f"{s.pair:22s} {s.status:8s} {s.breakdowns:5d} {errs} {s.wall_time:9.1f}")
+        cells = []
+        for k in keys:
+            v = s.max_errors.get(k, np.nan)
+            if s.status == "failed":
+                cells.append(f"{'failed':>17s}")
+            elif not np.isfinite(v):
+                cells.append(f"{'—':>17s}")
+            else:
+                cells.append(f"{v:17.3e}" + ("" if k.split()[0] not in s.unresolved_from else "*"))
+        errs = " ".join(c if len(c) == 17 else c[1:] for c in cells)
+        print(f"{s.pair:22s} {s.status:14s} {s.breakdowns:5d} {errs} {s.wall_time:9.1f}")
+        for inv, (t, bad, total) in s.unresolved_from.items():
+            notes.append(f"  * {s.pair}: the {'loop' if inv == 'I1' else 'surface'} was under-resolved at {bad} of "
+                         f"{total} outputs (first at t = {t:g}); its {inv} errors are over the others only "
+                         "(refine the set or shorten the run)")
+    if notes:
+        print("\n".join(notes))
+    bad = [s for s in summaries if s.status != "ok"]
+    if bad:
+        counts = {}
+        for s in bad:
+            counts[s.status] = counts.get(s.status, 0) + 1
+        print("not ok: " + ", ".join(f"{v} {k}" for k, v in counts.items()) + f" of {len(summaries)} pairs "
+              "(exit status 1)")
+    return EXIT_NOT_OK if bad else EXIT_OK
 
 
 def cmd_run(args) -> int:
@@ -34,17 +88,23 @@ def cmd_run(args) -> int:
     comm = communicator()
     scene = load_scene(args.scene)
     out = args.output or scene.output
+    if args.steps is not None:
+        if args.steps < 1:
+            raise ValueError(f"--steps must be a positive integer, got {args.steps}")
+        scene = scene.with_steps(args.steps)
     if comm.rank == 0:
         npts = (scene.loop["points"] if scene.loop else 0) + (
             scene.surface["n_sigma"] * scene.surface["n_tau"] if scene.surface else 0)
         print(f"scene '{scene.name}': {scene.system_name}, {npts} points, {len(scene.pairs)} pairs, "
               f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
               f"{comm.size} rank{'s' if comm.size > 1 else ''}", flush=True)
+    args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
+                         + (f" --steps {args.steps}" if args.steps is not None else ""))
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
                     progress=False if args.quiet else None, version=__version__)
     if comm.rank == 0:
-        _print_summary(summaries, out)
-    return 0
+        return _print_summary(summaries, out)
+    return EXIT_OK
 
 
 def cmd_audit(args) -> int:
@@ -56,6 +116,10 @@ def cmd_audit(args) -> int:
         if args.steps < 1:
             raise ValueError(f"--steps must be a positive integer, got {args.steps}")
         scene = dataclasses.replace(scene, steps=args.steps)
+    if args.points < 1:
+        raise ValueError(f"--points must be a positive integer, got {args.points}")
+    if args.levels < 1:
+        raise ValueError(f"--levels must be a positive integer, got {args.levels}")
     cands = audit.candidates_from(args.candidate, args.projection)
     refs = []
     for ref in ([] if args.reference == ["none"] else args.reference):
@@ -77,13 +141,18 @@ def cmd_audit(args) -> int:
 
 
 def cmd_scenes(args) -> int:
+    from . import scene as scene_module
     from .scene import builtin_scenes, load_scene
+    if args.keys:
+        print(scene_module.__doc__.strip())
+        return EXIT_OK
     for name, path in builtin_scenes().items():
         s = load_scene(name)
         npts = (s.loop["points"] if s.loop else 0) + (s.surface["n_sigma"] * s.surface["n_tau"] if s.surface else 0)
         print(f"{name:24s} {s.system_name:26s} {npts:6d} points  {len(s.pairs):2d} pairs  h = {s.h:<5g} "
               f"steps = {s.steps:<5d} {path}")
-    return 0
+    print("(every scene key: poincare scenes --keys)")
+    return EXIT_OK
 
 
 def cmd_plot(args) -> int:
@@ -107,6 +176,8 @@ def cmd_list(args) -> int:
 def build_parser():
     ap = argparse.ArgumentParser(prog="poincare",
                                  description="Poincaré integral invariant diagnostics of projected variational integrators.")
+    from . import __version__
+    ap.add_argument("--version", action="version", version=f"poincare {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scene (a built-in name or a TOML file; default: the 'default' scene)",
                          description="Run every (tableau, projection) pair of a scene and write one HDF5 file. "
@@ -115,6 +186,8 @@ def build_parser():
     run.add_argument("-o", "--output", help="HDF5 output path (default: the scene's output.path)")
     run.add_argument("--resume", action="store_true", help="continue an interrupted run of the same scene")
     run.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    run.add_argument("--steps", type=int, default=None,
+                     help="override the scene's run.steps (with --resume: extend a finished run)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=cmd_run)
     au = sub.add_parser("audit", help="which symplectic forms does an integrator preserve?",
@@ -136,7 +209,8 @@ def build_parser():
     au.add_argument("--plots", help="directory for the PNG plots")
     au.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
     au.set_defaults(func=cmd_audit)
-    sc = sub.add_parser("scenes", help="list the built-in scenes")
+    sc = sub.add_parser("scenes", help="list the built-in scenes (--keys: every scene key, documented)")
+    sc.add_argument("--keys", action="store_true", help="print the reference of every scene key")
     sc.set_defaults(func=cmd_scenes)
     pl = sub.add_parser("plot", help="PNG plots of a run file")
     pl.add_argument("file", help="HDF5 file written by 'poincare run'")
@@ -150,15 +224,32 @@ def build_parser():
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    rank = _rank()
+    from .output import OutputError
+
+    def say(msg):
+        # input errors are the same on every rank: print them once; say which rank otherwise
+        if rank == 0:
+            print(f"poincare: {msg}", file=sys.stderr, flush=True)
+
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if args.func is cmd_run else None
     try:
         return args.func(args)
+    except OutputError as exc:
+        print(f"poincare: error: {exc}" + (f" (rank {rank})" if rank else ""), file=sys.stderr, flush=True)
+        return EXIT_OUTPUT
     except (ValueError, OSError) as exc:
-        print(f"poincare: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("poincare: interrupted (the output file is readable up to its last output; use --resume)",
-              file=sys.stderr)
-        return 130
+        say(f"error: {exc}")
+        return EXIT_INPUT
+    except (KeyboardInterrupt, Terminated) as exc:
+        sig, code = ("SIGTERM", 143) if isinstance(exc, Terminated) else ("SIGINT", 130)
+        hint = getattr(args, "_resume_hint", None)
+        say(f"interrupted by {sig}; the output file is readable up to its last output"
+            + (f"; continue with: {hint}" if hint else ""))
+        return code
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

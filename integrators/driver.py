@@ -61,6 +61,7 @@ class PairSummary:
     max_errors: dict
     wall_time: float
     timings: dict = dataclasses.field(default_factory=dict)
+    unresolved_from: dict = dataclasses.field(default_factory=dict)   # {'I1': first t the set was under-resolved}
 
 
 class Progress:
@@ -154,7 +155,10 @@ class Diagnostics:
         """All forms of one invariant of one sample set, with its resolution, into ``row``.
 
         A set with a broken-down (frozen) point is no longer an advected set: its values are NaN.
+        ``resolved/<set>`` is 1 when the monitor (largest over the forms) is at most
+        invariants.UNDER_RESOLVED, else 0 (also when it is NaN).
         """
+        from invariants import UNDER_RESOLVED
         res = 0.0 if live.all() else np.nan
         for form in self.scene.forms:
             value = np.nan
@@ -166,6 +170,7 @@ class Diagnostics:
                     res = np.nan
             row[f"{name}/{form}"] = value
         row[f"resolution/{name}"] = res
+        row[f"resolved/{name}"] = 1 if res <= UNDER_RESOLVED else 0
 
     def row(self, t, q, p, lam, live):
         import invariants
@@ -188,20 +193,59 @@ class Diagnostics:
         return row
 
 
+def _check_output(path, resume, force):
+    """One-line reasons why ``path`` cannot be the output, or None."""
+    if resume and force:
+        return "--resume and --force contradict each other: --resume continues the file, --force replaces it"
+    if path.is_dir():
+        return f"output '{path}' is a directory; give a file name, e.g. -o {path / 'run.h5'}"
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        return f"output directory '{parent}' does not exist"
+    if path.exists() and not (resume or force):
+        return f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
+    if resume and not path.exists():
+        return f"cannot resume: '{path}' does not exist"
+    return None
+
+
+def _resume_plan(path, scene):
+    """Check that ``path`` was written by ``scene`` (or by the same scene with fewer steps)."""
+    from .scene import parse_scene, scene_differences
+    text, steps = output.read_scene_text(path)
+    old = parse_scene(text, origin=str(path))
+    if steps is not None:
+        old = dataclasses.replace(old, steps=steps)
+    diff = scene_differences(old, scene)
+    if diff == ["run.steps"] and scene.steps > old.steps:
+        return old.steps                      # extend a run to more steps
+    if diff == ["run.steps"]:
+        raise ValueError(f"cannot resume '{path}' with fewer steps ({scene.steps}) than it was run for ({old.steps})")
+    if diff:
+        raise ValueError(f"cannot resume '{path}': the scene differs in {', '.join(diff)} "
+                         "(only run.steps may grow; everything else must match)")
+    return None
+
+
 def run(scene, path, *, resume=False, force=False, comm=None, progress=None, version="0", after_output=None):
     """Run every pair of ``scene`` and write ``path``; returns a list of PairSummary (rank 0) or None.
 
+    resume : continue the pairs of an interrupted file, or extend a finished one when only
+        ``run.steps`` grew (the result is bitwise the run of the longer scene).
     after_output : optional callback(pair, step) on rank 0 after each flushed output (tests use it).
     """
+    from invariants import UNDER_RESOLVED
     comm = comm or communicator()
     rank, size = comm.rank, comm.size
     path = Path(path)
-    error = None
+    error, grown_from = None, None
     if rank == 0:
-        if path.exists() and not (resume or force):
-            error = f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
-        elif resume and not path.exists():
-            error = f"cannot resume: '{path}' does not exist"
+        error = _check_output(path, resume, force)
+        if error is None and resume:
+            try:
+                grown_from = _resume_plan(path, scene)
+            except ValueError as exc:
+                error = str(exc)
     error = comm.bcast(error, root=0)
     if error:
         raise ValueError(error)
@@ -212,79 +256,62 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     n = q0.shape[0]
     offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
     h = scene.h
-    n_out = scene.n_outputs
 
     f = None
     diagnostics = None
-    if rank == 0:
-        diagnostics = Diagnostics(scene, system, q0)
-        max_s = max(builtin_tableau(t).s for t in scene.tableaus)
-        if resume:
-            f = output.open_for_resume(path, scene)
-        else:
-            f = None
-    # checkpoint shapes depend on the tableau's s: one layout per scene, sized for the largest s
-    summaries = []
     todo = []
     if rank == 0:
-        if not resume:
-            shapes = _state_shapes(n, system.d, max_s)
-            f = output.create(path, scene, version, n, shapes)
-        for tab, proj in scene.pairs:
-            g = f["runs"][output.pair_name(tab, proj)]
-            if g.attrs["status"] in ("ok", "partial", "failed"):
-                todo.append(None)
-                continue
-            step, state = output.read_checkpoint(g)
-            if step is None:
-                output.truncate(g, 0)
-                todo.append((0, None))
+        try:
+            diagnostics = Diagnostics(scene, system, q0)
+            if resume:
+                f = output.open_for_resume(path)
+                f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
+                f.attrs["steps"] = scene.steps
             else:
-                output.truncate(g, step // scene.output_every + 1)
-                todo.append((step, state))
-        f.flush()
+                max_s = max(builtin_tableau(t).s for t in scene.tableaus)
+                f = output.create(path, scene, version, n, _state_shapes(n, system.d, max_s), UNDER_RESOLVED)
+            for tab, proj in scene.pairs:
+                g = f["runs"][output.pair_name(tab, proj)]
+                step, state = output.read_checkpoint(g)
+                if g.attrs["status"] in output.FINISHED and grown_from is None:
+                    todo.append(None)
+                    continue
+                g.attrs["status"] = "pending"
+                if step is None:
+                    output.truncate(g, 0)
+                    todo.append((0, None))
+                else:
+                    output.truncate(g, step // scene.output_every + 1)
+                    todo.append((step, state))
+            f.flush()
+        except OSError as exc:
+            todo = output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
+            if f is not None:
+                _close_quietly(f)
     todo = comm.bcast(todo if rank == 0 else None, root=0)
+    if isinstance(todo, Exception):
+        raise todo
 
     timings = {}
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
-    for (tab_name, proj), job in zip(scene.pairs, todo):
-        name = output.pair_name(tab_name, proj)
-        if job is None:
-            continue
-        start_step, saved = job
-        tab = builtin_tableau(tab_name)
-        stepper = Stepper(system, tab, proj, h)
-        blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
-        lo, hi = blocks[rank]
-        if saved is None:
-            st = State(q0[lo:hi], system.theta(q0[lo:hi]), np.zeros((hi - lo, system.d)), h, tab.s)
-        else:
-            saved = comm.bcast(saved if rank == 0 else None, root=0)
-            st = _state_from(_unpad(saved, tab.s), lo, hi, h, tab.s)
-        g = f["runs"][name] if rank == 0 else None
-        wall0 = float(g["wall_clock"][0]) if rank == 0 else 0.0
-        t_start = time.perf_counter()
-        clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
-        if start_step == 0:
-            _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
-        for step in range(start_step + 1, scene.steps + 1):
-            t0 = time.perf_counter()
-            advance(stepper, st, step * h)
-            clock["advance"] += time.perf_counter() - t0
-            if step % scene.output_every == 0:
-                if rank == 0:
-                    g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
-                _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
-            if rank == 0:
-                bar.update(1, name)
-        timings[name] = clock
-        stats = comm.gather((clock["advance"], hi - lo), root=0)
-        if rank == 0:
-            offload, speed = _balance(stats, clock)
-            g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
-            f.flush()
-    comm.Barrier()
+    try:
+        for (tab_name, proj), job in zip(scene.pairs, todo):
+            if job is None:
+                continue
+            name = output.pair_name(tab_name, proj)
+            offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, diagnostics,
+                                       after_output, bar, timings, UNDER_RESOLVED)
+        comm.Barrier()
+    except OSError as exc:
+        if f is not None:
+            _close_quietly(f)
+        raise output.OutputError(f"writing '{path}' failed: {output.plain_error(exc)}; every output before "
+                                 "the failure is in the file (free space, then --resume)") from None
+    except BaseException:
+        if f is not None:
+            _close_quietly(f)
+        raise
     if rank != 0:
         return None
     f.close()
@@ -292,6 +319,61 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     for s_ in summaries:
         s_.timings = timings.get(s_.pair, {})
     return summaries
+
+
+def _close_quietly(f):
+    try:
+        f.flush()
+    except Exception:
+        pass
+    try:
+        f.close()
+    except Exception:
+        pass
+
+
+def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, diagnostics, after_output, bar,
+              timings, threshold):
+    """Advance one pair from its start (or checkpoint) to scene.steps, writing every output; rank 0
+    writes the pair's status when it finishes.  Returns the next pair's (offload, speed)."""
+    rank, size = comm.rank, comm.size
+    n, h = q0.shape[0], scene.h
+    name = output.pair_name(tab_name, proj)
+    start_step, saved = job
+    tab = builtin_tableau(tab_name)
+    stepper = Stepper(system, tab, proj, h)
+    blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
+    lo, hi = blocks[rank]
+    if saved is None:
+        st = State(q0[lo:hi], system.theta(q0[lo:hi]), np.zeros((hi - lo, system.d)), h, tab.s)
+    else:
+        saved = comm.bcast(saved if rank == 0 else None, root=0)
+        st = _state_from(_unpad(saved, tab.s), lo, hi, h, tab.s)
+    g = f["runs"][name] if rank == 0 else None
+    wall0 = float(g["wall_clock"][0]) if rank == 0 else 0.0
+    t_start = time.perf_counter()
+    clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
+    if start_step == 0:
+        _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
+    for step in range(start_step + 1, scene.steps + 1):
+        t0 = time.perf_counter()
+        advance(stepper, st, step * h)
+        clock["advance"] += time.perf_counter() - t0
+        if step % scene.output_every == 0:
+            if rank == 0:
+                g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
+            _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
+        if rank == 0:
+            bar.update(1, name)
+    timings[name] = clock
+    stats = comm.gather((clock["advance"], hi - lo), root=0)
+    if rank != 0:
+        return offload, speed
+    g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
+    status, _, _, unresolved = output.pair_summary(g, scene.n_outputs, threshold)
+    output.set_status(g, status, unresolved)
+    f.flush()
+    return _balance(stats, clock)
 
 
 def _state_shapes(n, d, s):
@@ -345,25 +427,17 @@ def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, 
 
 
 def finalize(path, scene):
-    """Set each pair's status and wall_time attributes and summarise."""
+    """Each pair's status and wall_time attributes, written, and the summaries."""
     import h5py
     summaries = []
     with h5py.File(path, "r+") as f:
+        threshold = float(f.attrs.get("resolution_threshold", np.inf))
         for tab, proj in scene.pairs:
             name = output.pair_name(tab, proj)
             g = f["runs"][name]
-            bt = g["breakdown_time"][...]
-            broke = int(np.isfinite(bt).sum())
-            complete = g["t"].shape[0] == scene.n_outputs
-            status = ("failed" if broke == bt.size else "partial" if broke else "ok") if complete else "pending"
-            g.attrs["status"] = status
+            status, broke, errs, unresolved = output.pair_summary(g, scene.n_outputs, threshold)
+            output.set_status(g, status, unresolved)
             g.attrs["wall_time"] = float(g["wall_clock"][0])
-            errs = {}
-            for inv in ("I1", "I2"):
-                if inv in g:
-                    for form in g[inv]:
-                        v = g[inv][form][...]
-                        with np.errstate(all="ignore"):
-                            errs[f"{inv} {form}"] = float(np.nanmax(np.abs(v - v[0]) / abs(v[0]))) if v.size else np.nan
-            summaries.append(PairSummary(name, status, broke, errs, float(g["wall_clock"][0])))
+            summaries.append(PairSummary(name, status, broke, errs, float(g["wall_clock"][0]),
+                                         unresolved_from=unresolved))
     return summaries

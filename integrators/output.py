@@ -1,36 +1,51 @@
 """HDF5 output of a batch run, written incrementally and crash-safe.
 
-Layout (format ``poincare/1``)::
+Layout (format ``poincare/2``)::
 
-    /                       attrs: format, scene (TOML text), version, system, created
+    /                       attrs: format, scene (TOML text), version, system, created,
+                                   resolution_threshold (the monitor value above which a set is under-resolved)
     /runs/<TABLEAU>-<projection>/
         t                   (n,)       output times
         I1/<form>, I2/<form> (n,)      invariants (only the forms asked for; I2 only with a surface)
-        resolution/I1, resolution/I2 (n,)  resolution monitor of the loop / surface
+        resolution/I1, resolution/I2 (n,)  resolution monitor of the loop / surface (largest over the forms)
+        resolved/I1, resolved/I2     (n,)  1 where the set resolved its invariant (monitor ≤ threshold), else 0
         energy_error        (n,)       max over points of |H − H₀|/|H₀|
         momentum_error      (n,)       max over points of |P − P₀|
         constraint_error    (n,)       max over points of |p − ϑ(q)|
         breakdown_time      (npoints,) per point, inf = never (loop points first, then the surface row by row)
         points/loop, points/surface    (n, N, d), (n, nσ, nτ, d) only with run.store_points
         checkpoint/a, checkpoint/b     two alternating copies of the integrator state
-        attrs: status (pending | ok | partial | failed), wall_time [s]
+        attrs: status, wall_time [s], under_resolved_from/I1, under_resolved_from/I2 (first output time at
+               which the set was under-resolved; absent while it is resolved)
+
+``status`` is written when a pair finishes and is one of (see :data:`STATUSES`)
+
+    pending          not finished (still running, or killed: ``--resume`` continues it)
+    ok               every point completed and every set stayed resolved
+    under-resolved   every point completed, but a set stopped resolving its invariant at some output
+    partial          some points broke down (their sets' invariants are NaN from then on)
+    failed           every point broke down
 
 Every dataset grows by one row per output and the file is flushed after each output,
 so a run killed at any moment leaves a readable file with every output up to the
-last flush.  The file uses HDF5's default (earliest) format: the newer superblock
-keeps "open for writing" flags that a killed writer leaves set, after which plain
-readers refuse the file.  A checkpoint slot is first marked invalid (step = −1),
-then written, then given its step; resume uses the newest valid slot and drops any
-rows written after it.
+last flush.  Every chunked dataset carries HDF5's fletcher32 checksum, so damaged bytes
+are reported on reading (:class:`DamagedFile`) instead of being plotted.  The file uses
+HDF5's default (earliest) format: the newer superblock keeps "open for writing" flags that
+a killed writer leaves set, after which plain readers refuse the file.  A checkpoint slot is
+first marked invalid (step = −1), then written, then given its step; resume uses the newest
+valid slot and drops any rows written after it.
 """
 from __future__ import annotations
 
 import datetime
+import re
 
 import h5py
 import numpy as np
 
-FORMAT = "poincare/1"
+FORMAT = "poincare/2"
+STATUSES = ("pending", "ok", "under-resolved", "partial", "failed")
+FINISHED = ("ok", "under-resolved", "partial", "failed")
 STATE_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
                 "iterations", "steps")
 
@@ -39,17 +54,52 @@ def pair_name(tableau, projection):
     return f"{tableau}-{projection}"
 
 
-def _series(g, name):
-    return g.create_dataset(name, shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
+class OutputError(OSError):
+    """The output file could not be created or written (disk full, no permission, ...): one line."""
 
 
-def create(path, scene, version, npoints, state_shapes):
-    """Create the file with every group and dataset of the scene."""
-    f = h5py.File(path, "w")
+class DamagedFile(ValueError):
+    """A run file whose metadata or data is damaged (failed checksum, missing groups)."""
+
+
+def plain_error(exc) -> str:
+    """The useful part of an h5py/OS error: 'Permission denied', 'No space left on device', ..."""
+    text = str(exc)
+    m = re.search(r"error message = '([^']*)'", text)
+    if m:
+        return m.group(1)
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    m = re.search(r"\(([^()]*)\)\s*$", text)
+    return m.group(1) if m else text
+
+
+def _series(g, name, dtype="f8"):
+    return g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(256,), fletcher32=True)
+
+
+def create(path, scene, version, npoints, state_shapes, threshold):
+    """Create the file with every group and dataset of the scene (OutputError in one line if it cannot)."""
+    try:
+        f = h5py.File(path, "w")
+    except OSError as exc:
+        raise OutputError(f"cannot create output '{path}': {plain_error(exc)}") from None
+    try:
+        _layout(f, scene, version, npoints, state_shapes, threshold)
+        f.flush()
+    except OSError as exc:
+        f.close()
+        raise OutputError(f"cannot write output '{path}': {plain_error(exc)}") from None
+    return f
+
+
+def _layout(f, scene, version, npoints, state_shapes, threshold):
     f.attrs["format"] = FORMAT
     f.attrs["scene"] = scene.text
+    f.attrs["steps"] = scene.steps          # run.steps in force (the command line may override the text)
     f.attrs["version"] = version
     f.attrs["system"] = scene.system_name
+    f.attrs["resolution_threshold"] = threshold
     f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     runs = f.create_group("runs")
     for tab, proj in scene.pairs:
@@ -62,26 +112,26 @@ def create(path, scene, version, npoints, state_shapes):
                 for form in scene.forms:
                     _series(g, f"{inv}/{form}")
                 _series(g, f"resolution/{inv}")
+                _series(g, f"resolved/{inv}", "u1")
         for diag in scene.diagnostics:
             _series(g, f"{diag}_error")
-        g.create_dataset("breakdown_time", data=np.full(npoints, np.inf))
+        g.create_dataset("breakdown_time", data=np.full(npoints, np.inf), chunks=True, fletcher32=True)
         g.create_dataset("wall_clock", data=np.zeros(1))
         if scene.store_points:
             if scene.loop is not None:
                 n, d = scene.loop["points"], state_shapes["q"][0][1]
-                g.create_dataset("points/loop", shape=(0, n, d), maxshape=(None, n, d), dtype="f8", chunks=(1, n, d))
+                g.create_dataset("points/loop", shape=(0, n, d), maxshape=(None, n, d), dtype="f8", chunks=(1, n, d),
+                                 fletcher32=True)
             if scene.surface is not None:
                 ns, nt, d = scene.surface["n_sigma"], scene.surface["n_tau"], state_shapes["q"][0][1]
                 g.create_dataset("points/surface", shape=(0, ns, nt, d), maxshape=(None, ns, nt, d), dtype="f8",
-                                 chunks=(1, ns, nt, d))
+                                 chunks=(1, ns, nt, d), fletcher32=True)
         for slot in ("a", "b"):
             c = g.create_group(f"checkpoint/{slot}")
             c.create_dataset("step", data=np.array(-1, dtype=np.int64))
             for name in STATE_FIELDS:
                 shape, dtype = state_shapes[name]
-                c.create_dataset(name, shape=shape, dtype=dtype)
-    f.flush()
-    return f
+                c.create_dataset(name, shape=shape, dtype=dtype, chunks=True, fletcher32=True)
 
 
 def append(g, row: dict):
@@ -126,16 +176,74 @@ def truncate(g, n_rows):
     g.visititems(visit)
 
 
-def open_for_resume(path, scene):
-    """Reopen an interrupted run; the scene must be the one it was started with."""
+def read_scene_text(path):
+    """(scene TOML, steps in force) stored in a run file (DamagedFile / ValueError in one line)."""
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") not in (FORMAT, "poincare/1"):
+                raise ValueError(f"'{path}' is not a poincare run file")
+            steps = f.attrs.get("steps")
+            return str(f.attrs["scene"]), (None if steps is None else int(steps))
+    except (OSError, KeyError) as exc:
+        raise DamagedFile(f"cannot read '{path}': damaged or not an HDF5 run file ({plain_error(exc)})") from None
+
+
+def open_for_resume(path):
+    """Reopen an interrupted run for writing; the caller has checked its scene."""
     try:
         f = h5py.File(path, "r+")
     except OSError as exc:
-        raise ValueError(f"cannot resume '{path}': {exc}") from None
+        raise ValueError(f"cannot resume '{path}': {plain_error(exc)}") from None
     if f.attrs.get("format") != FORMAT:
+        found = f.attrs.get("format")
         f.close()
-        raise ValueError(f"cannot resume '{path}': not a {FORMAT} file")
-    if f.attrs.get("scene") != scene.text:
-        f.close()
-        raise ValueError(f"cannot resume '{path}': it was written by a different scene")
+        raise ValueError(f"cannot resume '{path}': format {found!r}, this version writes {FORMAT}")
     return f
+
+
+def pair_summary(g, n_outputs, threshold):
+    """(status, breakdowns, {'I1 form': max error over the resolved outputs}, unresolved) of one pair
+    group, unresolved = {set: (first under-resolved t, under-resolved outputs, outputs)}; reading a
+    damaged dataset raises DamagedFile naming it."""
+    try:
+        bt = g["breakdown_time"][...]
+        t = g["t"][...]
+        broke = int(np.isfinite(bt).sum())
+        unresolved_from, errs = {}, {}
+        for inv in ("I1", "I2"):
+            if inv not in g:
+                continue
+            res = g[f"resolution/{inv}"][...]
+            ok = (res <= threshold)           # NaN (a set with a broken point) is not resolved either
+            if not broke and (~ok).any():
+                unresolved_from[inv] = (float(t[np.flatnonzero(~ok)[0]]), int((~ok).sum()), int(ok.size))
+            for form in g[inv]:
+                v = g[inv][form][...]
+                use = ok if not broke else np.isfinite(v)
+                with np.errstate(all="ignore"):
+                    e = np.abs(v - v[0]) / abs(v[0]) if v.size else v
+                errs[f"{inv} {form}"] = float(np.max(e[use])) if use.any() and np.isfinite(e[use]).all() else np.nan
+    except OSError as exc:
+        raise DamagedFile(f"dataset in '{g.name}' is damaged ({plain_error(exc)})") from None
+    complete = t.shape[0] == n_outputs
+    if not complete:
+        status = "pending"
+    elif broke == bt.size:
+        status = "failed"
+    elif broke:
+        status = "partial"
+    elif unresolved_from:
+        status = "under-resolved"
+    else:
+        status = "ok"
+    return status, broke, errs, unresolved_from
+
+
+def set_status(g, status, unresolved_from):
+    g.attrs["status"] = status
+    for inv in ("I1", "I2"):
+        key = f"under_resolved_from/{inv}"
+        if inv in unresolved_from:
+            g.attrs[key] = unresolved_from[inv][0]
+        elif key in g.attrs:
+            del g.attrs[key]

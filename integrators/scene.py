@@ -80,6 +80,12 @@ class Scene:
         """(tableau, projection) pairs in run order."""
         return [(t, p) for t in self.tableaus for p in self.projections]
 
+    def with_steps(self, steps: int) -> "Scene":
+        """The same scene run for ``steps`` steps (``poincare run --steps``)."""
+        if steps < self.output_every:
+            raise SceneError(f"--steps {steps} is below run.output_every = {self.output_every}")
+        return dataclasses.replace(self, steps=int(steps))
+
     @property
     def n_outputs(self) -> int:
         return self.steps // self.output_every + 1
@@ -249,6 +255,18 @@ def _check_points(scene, system):
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise SceneError(f"{what}: point {k} = {q[k].tolist()} is not finite or outside the domain of {system.name}")
+
+
+_KEYS = {"system_name": "system.name", "system_params": "system.params", "loop": "loop", "surface": "surface",
+         "tableaus": "run.tableaus", "projections": "run.projections", "h": "run.h", "steps": "run.steps",
+         "output_every": "run.output_every", "forms": "run.forms", "diagnostics": "run.diagnostics",
+         "store_points": "run.store_points"}
+
+
+def scene_differences(a: Scene, b: Scene) -> list:
+    """The scene keys whose parsed values differ between a and b and change the results (not the
+    name, the output path, comments or formatting)."""
+    return [key for field, key in _KEYS.items() if getattr(a, field) != getattr(b, field)]
 
 
 def builtin_scenes() -> dict:

@@ -36,7 +36,9 @@ class InvariantValue:
     """An invariant with its resolution monitor.
 
     value : float
-    resolution : relative size of the highest modes of the sampled set (and fields)
+    resolution : relative size of the highest modes of the sampled set: of q (noncanonical), of q
+        and of p (canonical), of (q, hλ) together (corrected: hλ enters ϑ_λ as a displacement of q,
+        so round-off noise in a λ far smaller than q does not count as under-resolution)
     under_resolved : resolution > UNDER_RESOLVED (1e-10)
     """
 
@@ -92,7 +94,7 @@ def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=Non
     fields = [q]
     if Al is not None:
         integrand = integrand + np.sum(Al * spectral.loop_derivative(lam), axis=1)
-        fields.append(lam)
+        fields = [np.concatenate([q, h * lam], axis=-1)]     # hλ has the units of q (dq − h dλ)
     if form == "canonical":
         fields.append(p)
     res = max(spectral.loop_tail(f) for f in fields)
@@ -145,7 +147,7 @@ def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=No
         xs = np.concatenate([qs, spectral.chebyshev_derivative(lam, 0)], axis=-1)
         xt = np.concatenate([qt, spectral.chebyshev_derivative(lam, 1)], axis=-1)
         integrand = np.einsum("...i,...ij,...j->...", xs, Om, xt)
-        fields.append(lam)
+        fields = [np.concatenate([q, h * lam], axis=-1)]     # hλ has the units of q (dq − h dλ)
     else:
         raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
     res = max(spectral.surface_tail(f) for f in fields)

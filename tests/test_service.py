@@ -20,10 +20,10 @@ name = "small"
 [system]
 name = "guiding_centre_symmetric"
 [loop]
-points = 32
+points = 64
 [surface]
-n_sigma = 12
-n_tau = 12
+n_sigma = 20
+n_tau = 20
 [run]
 tableaus = ["GLRK1", "GLRK2"]
 projections = ["none", "symmetric", "symplectic"]
@@ -51,8 +51,8 @@ def edit(text, old, new):
     (('"none", "symmetric"', '"none", "orthogonal"'), "unknown value 'orthogonal'"),
     (('name = "guiding_centre_symmetric"', 'name = "pendulum"'), "unknown system 'pendulum'"),
     (('name = "guiding_centre_symmetric"', 'name = "guiding_centre_symmetric"\nparams = { nu = 1.0 }'), "unknown parameter 'nu'"),
-    (("points = 32", "points = 32\nparams = { u0 = nan }"), "not finite or outside the domain"),
-    (("points = 32", "points = 2"), "loop.points must be at least 3"),
+    (("points = 64", "points = 64\nparams = { u0 = nan }"), "not finite or outside the domain"),
+    (("points = 64", "points = 2"), "loop.points must be at least 3"),
     (("output_every = 4", "output_every = 0"), "run.output_every"),
     (("forms = [", "forms = ['magic', "), "unknown value 'magic'"),
     (("[run]", "[run]\ntableaus = 3\n"), "not valid TOML"),
@@ -114,13 +114,13 @@ def test_run_writes_the_spec_layout_and_the_papers_findings(tmp_path):
     summaries = driver.run(scene, out, progress=False)
     assert [s.pair for s in summaries] == [f"{t}-{p}" for t, p in scene.pairs]
     with h5py.File(out, "r") as f:
-        assert f.attrs["format"] == "poincare/1" and f.attrs["scene"] == SMALL
+        assert f.attrs["format"] == "poincare/2" and f.attrs["scene"] == SMALL
         g = f["runs/GLRK1-symplectic"]
         assert g["t"].shape == (11,) and g.attrs["status"] == "ok" and g.attrs["wall_time"] > 0
         for name in ("I1/canonical", "I1/noncanonical", "I1/corrected", "I2/corrected", "resolution/I1",
                      "resolution/I2", "energy_error", "momentum_error", "constraint_error"):
             assert g[name].shape == (11,), name
-        assert g["breakdown_time"].shape == (32 + 144,)
+        assert g["breakdown_time"].shape == (64 + 400,)
         rel = lambda v: np.max(np.abs(v - v[0]) / abs(v[0]))
         # sec:app_integral_invariants: unprojected keeps the canonical forms, not the noncanonical ones
         none = f["runs/GLRK1-none"]
@@ -134,12 +134,12 @@ def test_run_writes_the_spec_layout_and_the_papers_findings(tmp_path):
 
 
 def test_no_surface_means_no_surface_data(tmp_path):
-    scene = parse_scene(edit(SMALL, "[surface]\nn_sigma = 12\nn_tau = 12\n", ""))
+    scene = parse_scene(edit(SMALL, "[surface]\nn_sigma = 20\nn_tau = 20\n", ""))
     driver.run(scene, tmp_path / "loop.h5", progress=False)
     with h5py.File(tmp_path / "loop.h5", "r") as f:
         g = f["runs/GLRK2-none"]
         assert "I2" not in g and "resolution/I2" not in g and "points" not in g
-        assert g["breakdown_time"].shape == (32,)
+        assert g["breakdown_time"].shape == (64,)
 
 
 def poincare(*args, n=None, **kw):
@@ -170,7 +170,8 @@ def test_kill_and_resume_gives_the_same_bits(tmp_path):
     scene = tmp_path / "small.toml"
     scene.write_text(edit(SMALL, "steps = 40", "steps = 1000"))
     full, part = tmp_path / "full.h5", tmp_path / "part.h5"
-    assert poincare("run", str(scene), "-o", str(full), "-q").returncode == 0
+    rc_full = poincare("run", str(scene), "-o", str(full), "-q").returncode
+    assert rc_full in (0, 1)              # 1: the 64-point loop is sheared out of resolution by t = 10⁴
     proc = subprocess.Popen([shutil.which("poincare") or str(Path(sys.executable).parent / "poincare"),
                              "run", str(scene), "-o", str(part), "-q"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -196,7 +197,7 @@ def test_kill_and_resume_gives_the_same_bits(tmp_path):
     r = poincare("run", str(scene), "-o", str(part), "-q")
     assert r.returncode == 2 and "--resume" in r.stderr
     r = poincare("run", str(scene), "-o", str(part), "-q", "--resume")
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == rc_full, r.stderr
     assert same(dump(full, skip=("wall_clock", "checkpoint")), dump(part, skip=("wall_clock", "checkpoint")))
 
 

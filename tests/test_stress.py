@@ -85,8 +85,8 @@ def test_service_with_a_huge_step_finishes_with_a_readable_file(tmp_path):
     text = SCENE.replace("h = 10.0", "h = 1.0e6")
     out = tmp_path / "huge.h5"
     summaries = driver.run(parse_scene(text), out, progress=False)
-    assert {s.status for s in summaries} <= {"ok", "partial", "failed"}
+    assert {s.status for s in summaries} <= {"ok", "under-resolved", "partial", "failed"}
     with h5py.File(out) as f:                                         # the file is complete and readable
         for name in ("GLRK2-symmetric", "GLRK2-none"):
             g = f["runs"][name]
-            assert g["t"].shape == (4,) and g.attrs["status"] in ("ok", "partial", "failed")
+            assert g["t"].shape == (4,) and g.attrs["status"] in ("ok", "under-resolved", "partial", "failed")
