@@ -48,8 +48,6 @@ Two measurements (docs/audit.md has the thresholds and the table for the built-i
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import importlib.util
 import math
 import sys
 import warnings
@@ -64,7 +62,7 @@ ROUNDOFF = 1e-11        # max relative invariant error still called round-off
 DRIFT_RATIO = 2.0       # last-quarter mean / first-quarter max above which an error drifts
 DEFECT_FLOOR = {"complex step": 1e-13, "central differences": 1e-10}   # relative defect = "symplectic"
 FD_ORDER8 = ((1, 4 / 5), (2, -1 / 5), (3, 4 / 105), (4, -1 / 280))
-RESOLVED = 1e-8        # resolution monitor above which a sample set no longer resolves its invariant
+from invariants.forms import UNDER_RESOLVED as RESOLVED   # the one resolution threshold (invariants.forms)
 READ_THRESHOLD = 1e-8   # a map whose outputs move less than this per unit of an input ignores it
 FD_STEP = 2.0 ** -10    # relative step of the central differences (truncation ~δ⁸, noise ~ulp/δ)
 
@@ -112,27 +110,8 @@ def stepper_map(tableau, projection) -> Callable:
 
 def load_function(spec: str) -> Callable:
     """``module:function`` or ``path/to/file.py:function`` -> the callable (ValueError if not found)."""
-    if ":" not in spec:
-        raise ValueError(f"step map '{spec}' must be given as module:function or file.py:function")
-    mod_name, func_name = spec.rsplit(":", 1)
-    try:
-        if mod_name.endswith(".py"):
-            path = Path(mod_name)
-            if not path.exists():
-                raise ValueError(f"step map file '{path}' not found")
-            spec_ = importlib.util.spec_from_file_location(f"_poincare_audit_{path.stem}", path)
-            module = importlib.util.module_from_spec(spec_)
-            spec_.loader.exec_module(module)
-        else:
-            module = importlib.import_module(mod_name)
-    except ValueError:
-        raise
-    except Exception as exc:   # the user's module failed to import: say why in one line
-        raise ValueError(f"cannot import '{mod_name}': {type(exc).__name__}: {exc}") from None
-    fn = getattr(module, func_name, None)
-    if not callable(fn):
-        raise ValueError(f"'{mod_name}' has no function '{func_name}'")
-    return fn
+    from .plugins import load_callable
+    return load_callable(spec, "step map")
 
 
 def candidates_from(spec: str, projections=None) -> list[Candidate]:
@@ -435,8 +414,15 @@ def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method
         if defect:
             if progress:
                 progress(f"{cand.name}: one-step defects at {len(qd)} points, {levels} step sizes")
-            entry["defect"], entry["jacobian"] = defect_study(cand.step, system, qd, scene.h, levels, method,
-                                                              cand.reads)
+            try:
+                entry["defect"], entry["jacobian"] = defect_study(cand.step, system, qd, scene.h, levels, method,
+                                                                  cand.reads)
+            except Exception as exc:      # the user's map raised: a verdict, not a traceback
+                why = f"step failed ({cand.name} raised {type(exc).__name__}: {exc})"
+                entry["defect"] = {form: {"h": [scene.h * 2.0 ** -k for k in range(levels)], "defect": None,
+                                          "order": None, "verdict": why}
+                                   for form in ("canonical", "noncanonical", "corrected")}
+                entry["jacobian"] = "none (the map raised)"
         report["candidates"].append(entry)
     return report
 

@@ -199,7 +199,9 @@ def build_parser():
     au.add_argument("candidate", help="built-in tableau, tableau .toml file, or module:function")
     au.add_argument("--projection", nargs="+", default=None,
                     help="projections to audit a tableau with (default: every one it admits)")
-    au.add_argument("--scene", default=None, help="scene giving system, h, steps, loop and surface (default: 'default')")
+    au.add_argument("--scene", default="point_vortices",
+                    help="scene giving system, h, steps, loop and surface (default: point_vortices, on which "
+                         "the defect and drift halves tell methods apart; the symmetric guiding centre hides them)")
     au.add_argument("--steps", type=int, default=None, help="override the scene's number of steps")
     au.add_argument("--reference", nargs="+", default=["GLRK2-symmetric", "GLRK2-standard"],
                     help="built-in pairs run side by side ('none' for no references)")
@@ -237,6 +239,12 @@ def main(argv=None) -> int:
         return args.func(args)
     except OutputError as exc:
         print(f"poincare: error: {exc}" + (f" (rank {rank})" if rank else ""), file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        if argv is None:
+            # the console script: HDF5 reports a failed write again from every object destructor at
+            # shutdown (pages of tracebacks, then sometimes a crash); the file is flushed and closed,
+            # so leave at once
+            os._exit(EXIT_OUTPUT)
         return EXIT_OUTPUT
     except (ValueError, OSError) as exc:
         say(f"error: {exc}")

@@ -265,6 +265,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             diagnostics = Diagnostics(scene, system, q0)
             if resume:
                 f = output.open_for_resume(path)
+                output.verify(f, path)
                 f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
                 f.attrs["steps"] = scene.steps
             else:
@@ -284,8 +285,9 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                     output.truncate(g, step // scene.output_every + 1)
                     todo.append((step, state))
             f.flush()
-        except OSError as exc:
-            todo = output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
+        except (OSError, ValueError) as exc:
+            todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
+                output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
             if f is not None:
                 _close_quietly(f)
     todo = comm.bcast(todo if rank == 0 else None, root=0)
@@ -303,7 +305,11 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, diagnostics,
                                        after_output, bar, timings, UNDER_RESOLVED)
         comm.Barrier()
-    except OSError as exc:
+    except output.OutputError:
+        if f is not None:
+            _close_quietly(f)
+        raise
+    except (OSError, RuntimeError) as exc:      # h5py raises RuntimeError for some failed writes
         if f is not None:
             _close_quietly(f)
         raise output.OutputError(f"writing '{path}' failed: {output.plain_error(exc)}; every output before "
@@ -418,6 +424,9 @@ def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, 
             row["points/loop"] = q[:nl]
         if scene.surface is not None:
             row["points/surface"] = q[nl:].reshape(diagnostics.surf_shape + (q.shape[1],))
+    need = sum(np.asarray(v).nbytes for v in row.values()) + sum(v.nbytes for v in full.values())
+    last = f"{name} t = {g['t'][-1]:g}" if g["t"].shape[0] else f"the pair before {name}"
+    output.ensure_space(f.filename, need, last)
     output.append(g, row)
     g["breakdown_time"][...] = full["breakdown_time"]
     output.write_checkpoint(f, g, step, _pad(full, g["checkpoint/a/Y"].shape[1]))

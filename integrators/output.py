@@ -74,6 +74,36 @@ def plain_error(exc) -> str:
     return m.group(1) if m else text
 
 
+SPACE_MARGIN = 1 << 18      # bytes kept free beyond an output's own size (HDF5 metadata, chunk slack)
+
+
+def available_bytes(path) -> float:
+    """Bytes the run may still add to ``path``: the free space of its file system, and no more than
+    the process's file-size limit (``ulimit -f``, which batch systems set) allows."""
+    import os
+    import resource
+    import shutil
+    from pathlib import Path
+    path = Path(path)
+    free = float(shutil.disk_usage(path.parent if str(path.parent) else ".").free)
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY:
+        size = os.path.getsize(path) if path.exists() else 0
+        free = min(free, float(soft - size))
+    return free
+
+
+def ensure_space(path, nbytes, where):
+    """OutputError before writing when fewer than ``nbytes`` + SPACE_MARGIN bytes are available: HDF5
+    reports a failed write only from object destructors (and may then crash), so the driver checks
+    first and stops with the file intact up to its last output."""
+    free = available_bytes(path)
+    if free < nbytes + SPACE_MARGIN:
+        raise OutputError(f"no space left for '{path}' ({free / 2**20:.2f} MiB available, the next output "
+                          f"needs about {(nbytes + SPACE_MARGIN) / 2**20:.2f} MiB); the file holds every output "
+                          f"up to {where}: free space, then run again with --resume")
+
+
 def _series(g, name, dtype="f8"):
     return g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(256,), fletcher32=True)
 
@@ -199,6 +229,22 @@ def open_for_resume(path):
         f.close()
         raise ValueError(f"cannot resume '{path}': format {found!r}, this version writes {FORMAT}")
     return f
+
+
+def verify(f, path):
+    """Read every dataset once so that a failed checksum stops a resume before anything is written."""
+    bad = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and not bad:
+            try:
+                obj[...]
+            except OSError as exc:
+                bad.append((name, plain_error(exc)))
+    f.visititems(visit)
+    if bad:
+        raise DamagedFile(f"'{path}' is damaged: cannot read {bad[0][0]} ({bad[0][1]}); it cannot be resumed "
+                          "(start again with --force)")
 
 
 def pair_summary(g, n_outputs, threshold):

@@ -2,7 +2,9 @@
 
 * ``<stem>_I1_<form>.png``, ``<stem>_I2_<form>.png``: the paper's figure grid — rows are
   projections, columns are tableaus — of the relative invariant error |I(t) − I(0)|/|I(0)|
-  against time, log scale (errors span decades; exact zeros are drawn at 1e-17).
+  against time, log scale (errors span decades; exact zeros are drawn at 1e-17).  Outputs at
+  which the set was under-resolved are shaded grey; a pair that is not ``ok`` is labelled
+  with its status.  A damaged file (failed checksum, missing datasets) is one error line.
 * ``<stem>_diagnostics.png``: energy, momentum and constraint errors, one panel each, every pair.
 * ``<stem>_points.png``: the loop and the surface in the (q¹, q²) plane at five output times,
   when the run stored its points.
@@ -40,6 +42,34 @@ def _pairs(f):
     return tabs, projs
 
 
+def _read(g, name):
+    """A dataset's values; a failed checksum or missing dataset is a DamagedFile naming it."""
+    from .output import DamagedFile, plain_error
+    try:
+        return g[name][...]
+    except (OSError, KeyError) as exc:
+        raise DamagedFile(f"'{g.file.filename}' is damaged: cannot read {g.name}/{name} "
+                          f"({plain_error(exc)})") from None
+
+
+def _stretches(t, bad):
+    """(start, end) time intervals covering the outputs flagged in ``bad`` (half an output beyond)."""
+    out = []
+    if t.size == 0 or not bad.any():
+        return out
+    dt = (t[1] - t[0]) if t.size > 1 else 1.0
+    idx = np.flatnonzero(bad)
+    start = prev = idx[0]
+    for k in list(idx[1:]) + [None]:
+        if k is None or k != prev + 1:
+            out.append((t[start] - dt / 2, t[prev] + dt / 2))
+            if k is not None:
+                start = k
+        if k is not None:
+            prev = k
+    return out
+
+
 def _rel(v):
     v = np.asarray(v, dtype=float)
     if v.size == 0 or not np.isfinite(v[0]) or v[0] == 0:
@@ -57,7 +87,12 @@ def _grid(f, inv, form, out):
             name = f"{t}-{p}"
             if name in f["runs"] and f"{inv}/{form}" in f["runs"][name]:
                 g = f["runs"][name]
-                ax.semilogy(g["t"][...], _rel(g[f"{inv}/{form}"][...]), lw=0.9)
+                t = _read(g, "t")
+                ax.semilogy(t, _rel(_read(g, f"{inv}/{form}")), lw=0.9)
+                if f"resolved/{inv}" in g:          # grey where the set did not resolve its invariant
+                    bad = _read(g, f"resolved/{inv}") == 0
+                    for a, b in _stretches(t, bad):
+                        ax.axvspan(a, b, color="0.6", alpha=0.35, lw=0, label="under-resolved")
                 status = g.attrs.get("status", "")
                 if status not in ("ok", ""):
                     ax.text(0.02, 0.9, str(status), transform=ax.transAxes, fontsize=7, color="C3")
@@ -71,7 +106,7 @@ def _grid(f, inv, form, out):
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylim(FLOOR / 2, None)
     fig.suptitle(f"{'first' if inv == 'I1' else 'second'} Poincaré invariant {inv}, {form} form: "
-                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|", fontsize=10)
+                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|  (grey: set under-resolved)", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
@@ -87,7 +122,7 @@ def _diagnostics(f, out):
         for k, name in enumerate(f["runs"]):
             g = f["runs"][name]
             if d in g and g[d].shape[0]:
-                ax.semilogy(g["t"][...], np.maximum(g[d][...], FLOOR), lw=0.8, label=name,
+                ax.semilogy(_read(g, "t"), np.maximum(_read(g, d), FLOOR), lw=0.8, label=name,
                             ls=("-", "--", ":", "-.")[k // 10 % 4])
         ax.set_title(d.replace("_", " ") + (" (relative)" if d == "energy_error" else ""), fontsize=10)
         ax.set_xlabel("t")
@@ -133,26 +168,35 @@ def plot_file(path, outdir=None):
         raise ValueError(f"'{path}' does not exist")
     outdir = Path(outdir) if outdir else path.parent
     outdir.mkdir(parents=True, exist_ok=True)
-    stem = path.stem
-    written = []
+    from .output import DamagedFile, plain_error
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
-        raise ValueError(f"cannot read '{path}': {exc}") from None
+        raise ValueError(f"cannot read '{path}': {plain_error(exc)}") from None
     with f:
-        if "runs" not in f or not len(f["runs"]):
-            raise ValueError(f"'{path}' holds no runs")
-        first = f["runs"][list(f["runs"])[0]]
-        for inv in ("I1", "I2"):
-            if inv in first:
-                for form in first[inv]:
-                    out = outdir / f"{stem}_{inv}_{form}.png"
-                    _grid(f, inv, form, out)
-                    written.append(out)
-        out = outdir / f"{stem}_diagnostics.png"
-        if _diagnostics(f, out):
-            written.append(out)
-        out = outdir / f"{stem}_points.png"
-        if _points(f, out):
-            written.append(out)
+        try:
+            return _plot_all(f, path, outdir)
+        except (KeyError, OSError, TypeError, IndexError) as exc:
+            raise DamagedFile(f"'{path}' is damaged or not a poincare run file ({type(exc).__name__}: "
+                              f"{plain_error(exc)})") from None
+
+
+def _plot_all(f, path, outdir):
+    stem = path.stem
+    written = []
+    if "runs" not in f or not len(f["runs"]):
+        raise ValueError(f"'{path}' holds no runs")
+    first = f["runs"][list(f["runs"])[0]]
+    for inv in ("I1", "I2"):
+        if inv in first:
+            for form in first[inv]:
+                out = outdir / f"{stem}_{inv}_{form}.png"
+                _grid(f, inv, form, out)
+                written.append(out)
+    out = outdir / f"{stem}_diagnostics.png"
+    if _diagnostics(f, out):
+        written.append(out)
+    out = outdir / f"{stem}_points.png"
+    if _points(f, out):
+        written.append(out)
     return written

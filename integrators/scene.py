@@ -8,12 +8,12 @@ A scene file::
     params = { mu = 0.01 }                # optional overrides
 
     [loop]                                # optional: a closed loop of sample points
-    shape = "guiding_centre"              # built-in shape, or "module:function" returning (N, d)
+    shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function" returning (N, d)
     points = 2000
     params = { rx = 0.5 }                 # optional shape parameters
 
     [surface]                             # optional: a surface of n_sigma × n_tau Chebyshev points
-    shape = "guiding_centre"              # or "module:function" taking (S, T), returning (nσ, nτ, d)
+    shape = "guiding_centre"              # or "module:function" / "file.py:function" taking (S, T), returning (nσ, nτ, d)
     n_sigma = 100
     n_tau = 100
 
@@ -35,7 +35,6 @@ Every mistake is a :class:`SceneError` whose message names the key.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import tomllib
 from pathlib import Path
@@ -74,6 +73,7 @@ class Scene:
     store_points: bool
     output: str
     text: str
+    base: str | None = None          # directory of the scene file: where a relative file.py:function is looked up
 
     @property
     def pairs(self):
@@ -98,7 +98,7 @@ class Scene:
         if self.loop is None:
             return None
         from invariants import samples
-        shape = _shape(self.loop["shape"], "loop.shape")
+        shape = _shape(self.loop["shape"], "loop.shape", self.base)
         return samples.loop(shape, self.loop["points"], **self.loop.get("params", {}))
 
     def surface_points(self):
@@ -106,18 +106,18 @@ class Scene:
         if self.surface is None:
             return None
         from invariants import samples
-        shape = _shape(self.surface["shape"], "surface.shape")
+        shape = _shape(self.surface["shape"], "surface.shape", self.base)
         return samples.surface(shape, self.surface["n_sigma"], self.surface["n_tau"], **self.surface.get("params", {}))
 
 
-def _shape(spec, key):
+def _shape(spec, key, base=None):
     if ":" not in spec:
         return spec
-    mod, _, fn = spec.partition(":")
+    from .plugins import load_callable
     try:
-        return getattr(importlib.import_module(mod), fn)
-    except (ImportError, AttributeError) as exc:
-        raise SceneError(f"{key}: cannot load '{spec}' ({exc})") from None
+        return load_callable(spec, key, base)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
 
 
 _SCHEMA = {
@@ -233,21 +233,26 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     out = data.get("output", {}).get("path", f"{name}.h5")
     scene = Scene(name=name, system_name=sysd["name"], system_params=params, loop=loop, surface=surface,
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
-                  diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text)
+                  diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
+                  base=str(Path(origin).parent) if origin != "<scene>" else None)
     _check_points(scene, system)
     return scene
 
 
 def _check_points(scene, system):
-    for what, pts in (("loop", scene.loop_points), ("surface", scene.surface_points)):
+    for what, spec, pts in (("loop", scene.loop, scene.loop_points), ("surface", scene.surface, scene.surface_points)):
+        if spec is None:
+            continue
         try:
-            q = pts()
+            q = np.asarray(pts(), dtype=float)
         except SceneError:
             raise
-        except (TypeError, ValueError) as exc:
-            raise SceneError(f"{what}: {exc}") from None
-        if q is None:
-            continue
+        except Exception as exc:      # a user shape function may raise anything: one line naming it
+            who = f"{what}.shape '{spec['shape']}'" if ":" in spec["shape"] else what
+            raise SceneError(f"{who} failed: {type(exc).__name__}: {exc}") from None
+        want = (spec["points"], system.d) if what == "loop" else (spec["n_sigma"], spec["n_tau"], system.d)
+        if q.shape[-1:] == (system.d,) and q.shape != want:
+            raise SceneError(f"{what}: the shape gives points of shape {q.shape}, the scene needs {want}")
         q = q.reshape(-1, q.shape[-1])
         if q.shape[1] != system.d:
             raise SceneError(f"{what}: points have dimension {q.shape[1]}, system {system.name} needs {system.d}")
