@@ -32,8 +32,13 @@ class Terminated(BaseException):
     """SIGTERM (what batch schedulers send), raised in the main thread like KeyboardInterrupt."""
 
 
-def _on_sigterm(signum, frame):
-    raise Terminated()
+def _on_signal(signum, frame):
+    """Raise at once, and also leave the exception with the driver, which raises it again at the next
+    step: a signal that lands inside an object destructor (h5py's) would otherwise be swallowed."""
+    from . import driver
+    exc = Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    driver.STOP.append(exc)
+    raise exc
 
 
 def _rank() -> int:
@@ -45,6 +50,19 @@ def _rank() -> int:
             except ValueError:
                 pass
     return 0
+
+
+def _abort_other_ranks(code):
+    """Under mpiexec, stop every rank: the others may sit in a collective this rank will never join
+    (a signal reaches Python only between bytecodes, not inside a blocking MPI call).  The file was
+    closed by the driver before this point."""
+    if "mpi4py.MPI" not in sys.modules:
+        return
+    from mpi4py import MPI
+    if MPI.Is_initialized() and not MPI.Is_finalized() and MPI.COMM_WORLD.Get_size() > 1:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        MPI.COMM_WORLD.Abort(code)
 
 
 def _print_summary(summaries, out):
@@ -234,12 +252,21 @@ def main(argv=None) -> int:
         if rank == 0:
             print(f"poincare: {msg}", file=sys.stderr, flush=True)
 
-    previous = signal.signal(signal.SIGTERM, _on_sigterm) if args.func is cmd_run else None
+    previous = {}
+    if args.func is cmd_run:
+        # Rank 0 stops at once: it owns the file, says how to resume and stops the other ranks
+        # (MPI Abort).  The other ranks ignore SIGTERM and SIGINT (mpiexec forwards both to every
+        # rank): left alone they would quit while rank 0 may be blocked in a collective waiting for
+        # them, and rank 0 can only act on a signal once that collective returns.
+        handler = _on_signal if rank == 0 else (lambda signum, frame: None)
+        for signum in (signal.SIGTERM, signal.SIGINT):
+            previous[signum] = signal.signal(signum, handler)
     try:
         return args.func(args)
     except OutputError as exc:
         print(f"poincare: error: {exc}" + (f" (rank {rank})" if rank else ""), file=sys.stderr, flush=True)
         sys.stdout.flush()
+        _abort_other_ranks(EXIT_OUTPUT)
         if argv is None:
             # the console script: HDF5 reports a failed write again from every object destructor at
             # shutdown (pages of tracebacks, then sometimes a crash); the file is flushed and closed,
@@ -254,10 +281,13 @@ def main(argv=None) -> int:
         hint = getattr(args, "_resume_hint", None)
         say(f"interrupted by {sig}; the output file is readable up to its last output"
             + (f"; continue with: {hint}" if hint else ""))
+        _abort_other_ranks(code)
         return code
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, old_handler in previous.items():
+            signal.signal(signum, old_handler)
+        if "integrators.driver" in sys.modules:
+            sys.modules["integrators.driver"].STOP.clear()
 
 
 if __name__ == "__main__":

@@ -25,6 +25,9 @@ from .projections import Stepper
 from .tableaus import tableau as builtin_tableau
 
 
+STOP = []      # exceptions left by a signal handler (integrators.cli); raised again at the next step
+
+
 class _Serial:
     """The part of an MPI communicator the driver uses, for one process."""
 
@@ -362,6 +365,8 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, d
     if start_step == 0:
         _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
     for step in range(start_step + 1, scene.steps + 1):
+        if STOP:
+            raise STOP.pop()
         t0 = time.perf_counter()
         advance(stepper, st, step * h)
         clock["advance"] += time.perf_counter() - t0

@@ -261,7 +261,8 @@ def _wait_for_rows(path, pair, rows, proc, limit=120):
     return False
 
 
-def test_sigterm_flushes_says_how_to_resume_and_resume_finishes(tmp_path):
+@pytest.mark.parametrize("signame,code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_signal_flushes_says_how_to_resume_and_resume_finishes(tmp_path, signame, code):
     import signal
     scene = tmp_path / "gc.toml"
     scene.write_text(GC.replace("steps = 40", "steps = 400"))
@@ -269,15 +270,33 @@ def test_sigterm_flushes_says_how_to_resume_and_resume_finishes(tmp_path):
     proc = subprocess.Popen([str(BIN / "poincare"), "run", str(scene), "-o", str(out), "-q"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert _wait_for_rows(out, "GLRK2-symmetric", 5, proc)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(getattr(signal, signame))
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 143
-    assert err.count("\n") == 1 and "SIGTERM" in err and "--resume" in err and "Traceback" not in err
+    assert proc.returncode == code
+    assert err.count("\n") == 1 and signame in err and "--resume" in err and "Traceback" not in err
     with h5py.File(out) as f:
         n = f["runs/GLRK2-symmetric/t"].shape[0]
         assert n >= 5 and f["runs/GLRK2-symmetric/I1/noncanonical"].shape[0] == n
     r = poincare("run", str(scene), "-o", str(out), "-q", "--resume")
     assert r.returncode in (0, 1) and "GLRK2-symplectic" in r.stdout
+
+
+@pytest.mark.mpi
+def test_sigterm_under_mpiexec_stops_every_rank(tmp_path):
+    import signal
+    scene = tmp_path / "gc.toml"
+    scene.write_text(GC.replace("steps = 40", "steps = 40000"))
+    out = tmp_path / "gc.h5"
+    proc = subprocess.Popen([str(BIN / "mpiexec"), "-n", "2", str(BIN / "poincare"), "run", str(scene), "-o", str(out),
+                             "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert _wait_for_rows(out, "GLRK2-symmetric", 5, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)          # no rank is left waiting in a collective
+    assert proc.returncode == 143
+    ours = [line for line in err.splitlines() if line.startswith("poincare:")]
+    assert len(ours) == 1 and "SIGTERM" in ours[0] and "--resume" in ours[0] and "Traceback" not in err
+    with h5py.File(out) as f:
+        assert f["runs/GLRK2-symmetric/t"].shape[0] >= 5
 
 
 def test_a_full_disk_is_one_line_and_leaves_a_readable_file(tmp_path):
