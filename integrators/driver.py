@@ -147,7 +147,6 @@ class Diagnostics:
     """Invariants and conserved-quantity errors of the gathered points at one output time (rank 0)."""
 
     def __init__(self, scene, system, q0):
-        import invariants  # noqa: F401  (imported here: rank 0 only needs it)
         self.scene, self.system = scene, system
         self.n_loop = scene.loop["points"] if scene.loop else 0
         self.surf_shape = (scene.surface["n_sigma"], scene.surface["n_tau"]) if scene.surface else None
@@ -239,7 +238,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     """
     from invariants import UNDER_RESOLVED
     comm = comm or communicator()
-    rank, size = comm.rank, comm.size
+    rank = comm.rank
     path = Path(path)
     error, grown_from = None, None
     if rank == 0:
@@ -258,7 +257,6 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     q0 = np.concatenate(pts)
     n = q0.shape[0]
     offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
-    h = scene.h
 
     f = None
     diagnostics = None
@@ -304,7 +302,6 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         for (tab_name, proj), job in zip(scene.pairs, todo):
             if job is None:
                 continue
-            name = output.pair_name(tab_name, proj)
             offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, diagnostics,
                                        after_output, bar, timings, UNDER_RESOLVED)
         comm.Barrier()

@@ -79,7 +79,7 @@ def _rel(v):
 
 def _grid(f, inv, form, out):
     tabs, projs = _pairs(f)
-    fig, axes = plt.subplots(len(projs), len(tabs), figsize=(3.4 * len(tabs), 2.3 * len(projs)),
+    fig, axes = plt.subplots(len(projs), len(tabs), figsize=(max(3.4 * len(tabs), 6.0), 2.3 * len(projs) + 0.6),
                              sharex=True, sharey=True, squeeze=False)
     for i, p in enumerate(projs):
         for j, t in enumerate(tabs):
@@ -87,11 +87,11 @@ def _grid(f, inv, form, out):
             name = f"{t}-{p}"
             if name in f["runs"] and f"{inv}/{form}" in f["runs"][name]:
                 g = f["runs"][name]
-                t = _read(g, "t")
-                ax.semilogy(t, _rel(_read(g, f"{inv}/{form}")), lw=0.9)
+                times = _read(g, "t")
+                ax.semilogy(times, _rel(_read(g, f"{inv}/{form}")), lw=0.9)
                 if f"resolved/{inv}" in g:          # grey where the set did not resolve its invariant
                     bad = _read(g, f"resolved/{inv}") == 0
-                    for a, b in _stretches(t, bad):
+                    for a, b in _stretches(times, bad):
                         ax.axvspan(a, b, color="0.6", alpha=0.35, lw=0, label="under-resolved")
                 status = g.attrs.get("status", "")
                 if status not in ("ok", ""):
@@ -106,7 +106,7 @@ def _grid(f, inv, form, out):
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylim(FLOOR / 2, None)
     fig.suptitle(f"{'first' if inv == 'I1' else 'second'} Poincaré invariant {inv}, {form} form: "
-                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|  (grey: set under-resolved)", fontsize=10)
+                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|\n(grey: the set is under-resolved there)", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)

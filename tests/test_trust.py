@@ -1,6 +1,5 @@
 """Results you can trust (issue 15): no code from data files, names never matter, failures are
 failures, under-resolved sets are reported, batch-safe output, validated extension points."""
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -517,3 +516,11 @@ def test_version_license_citation_and_scene_keys(capsys):
     assert tomllib.loads((root / "pyproject.toml").read_text())["project"]["license"] == "MIT"
     cff = (root / "CITATION.cff").read_text()
     assert "cff-version" in cff and "Projected Variational Integrators" in cff
+
+
+def test_plot_shades_exactly_the_under_resolved_outputs():
+    from integrators.plots import _stretches
+    t = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    assert _stretches(t, np.array([0, 1, 1, 0, 1], bool)) == [(5.0, 25.0), (35.0, 45.0)]
+    assert _stretches(t, np.zeros(5, bool)) == []
+    assert _stretches(t, np.ones(5, bool)) == [(-5.0, 45.0)]
