@@ -120,7 +120,7 @@ def candidates_from(spec: str, projections=None) -> list[Candidate]:
     A tableau is audited with every projection in ``projections`` that it admits (default: all
     five; the symmetric, symplectic and midpoint projections need |R(∞)| = 1).
     """
-    from .projections import PROJECTIONS
+    from .projections import PROJECTIONS, admission
     from .tableaus import TABLEAU_NAMES, tableau, tableau_from_file
     if spec in TABLEAU_NAMES:
         tab = tableau(spec)
@@ -138,8 +138,7 @@ def candidates_from(spec: str, projections=None) -> list[Candidate]:
     for p in wanted:
         if p not in PROJECTIONS:
             raise ValueError(f"unknown projection '{p}'; choose from {', '.join(PROJECTIONS)}")
-    needs_unit = ("symmetric", "symplectic", "midpoint")
-    ok = [p for p in wanted if p not in needs_unit or abs(tab.R_inf) == 1.0]
+    ok = [p for p in wanted if admission(tab, p) is None]
     if not ok:
         raise ValueError(f"{tab.name} has R(∞) = {tab.R_inf:g}: none of {', '.join(wanted)} applies")
     return [pair_candidate(tab, p) for p in ok]

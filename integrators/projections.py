@@ -34,6 +34,22 @@ from . import vprk
 from .newton import EPS, newton
 
 PROJECTIONS = ("none", "standard", "symmetric", "symplectic", "midpoint")
+NEEDS_UNIT_R_INF = ("symmetric", "symplectic", "midpoint")   # σ = R(∞) must be ±1 (table in sec:projection)
+
+
+def admission(tableau, projection):
+    """None if ``projection`` can be used with ``tableau``, else the one-line reason.
+
+    The one place of this rule (the Stepper, scenes and the audit all ask here): the symmetric,
+    symplectic and midpoint projections multiply their post-projection by σ = R(∞), which the
+    paper's construction needs to be ±1.
+    """
+    if projection not in PROJECTIONS:
+        return f"unknown projection '{projection}'; choose one of {', '.join(PROJECTIONS)}"
+    if projection in NEEDS_UNIT_R_INF and abs(tableau.R_inf) != 1.0:
+        return (f"projection '{projection}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = {tableau.R_inf:g}; "
+                "use 'none' or 'standard'")
+    return None
 
 
 def _lagrange_matrix(nodes, targets):
@@ -71,11 +87,9 @@ class Stepper:
     """
 
     def __init__(self, system, tableau, projection, h):
-        if projection not in PROJECTIONS:
-            raise ValueError(f"unknown projection '{projection}'; choose one of {', '.join(PROJECTIONS)}")
-        if projection in ("symmetric", "symplectic", "midpoint") and tableau.R_inf in (0.0, float("inf")):
-            raise ValueError(f"projection '{projection}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = "
-                             f"{tableau.R_inf:g}; use 'none' or 'standard'")
+        why = admission(tableau, projection)
+        if why:
+            raise ValueError(why)
         self.system, self.tableau, self.projection, self.h = system, tableau, projection, float(h)
         self.sigma = 1.0 if projection == "standard" else float(np.sign(tableau.R_inf))
         self.coupled = projection in ("symmetric", "midpoint")

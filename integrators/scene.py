@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .projections import PROJECTIONS
+from .projections import PROJECTIONS, admission
 from .systems import SYSTEM_NAMES, system as builtin_system
 from .tableaus import tableau as builtin_tableau
 
@@ -227,8 +227,9 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     for t in tabs:
         tab = builtin_tableau(t)
         for p in projs:
-            if p in ("symmetric", "symplectic", "midpoint") and tab.R_inf in (0.0, float("inf")):
-                raise SceneError(f"run: projection '{p}' cannot be used with {t} (R(∞) = {tab.R_inf:g})")
+            why = admission(tab, p)
+            if why:
+                raise SceneError(f"run: {why}")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
     out = data.get("output", {}).get("path", f"{name}.h5")
     scene = Scene(name=name, system_name=sysd["name"], system_params=params, loop=loop, surface=surface,

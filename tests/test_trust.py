@@ -524,3 +524,23 @@ def test_plot_shades_exactly_the_under_resolved_outputs():
     assert _stretches(t, np.array([0, 1, 1, 0, 1], bool)) == [(5.0, 25.0), (35.0, 45.0)]
     assert _stretches(t, np.zeros(5, bool)) == []
     assert _stretches(t, np.ones(5, bool)) == [(-5.0, 45.0)]
+
+
+def test_one_admission_rule_for_integrate_scenes_and_audit(tmp_path):
+    """θ-method with θ = 3/4 has R(∞) = −1/3: the σ = R(∞) projections need ±1, everywhere alike."""
+    from integrators import audit
+    from integrators.projections import admission
+    tab = integrators.tableau_from_arrays("theta34", [["3/4"]], ["1"], ["3/4"])
+    assert abs(tab.R_inf + 1 / 3) < 1e-15
+    sy = integrators.system("guiding_centre_symmetric")
+    for proj in ("symmetric", "symplectic", "midpoint"):
+        assert "needs |R(∞)| = 1" in admission(tab, proj)
+        with pytest.raises(ValueError, match=r"needs \|R\(∞\)\| = 1"):
+            integrators.integrate(sy, [0.5, 0.0, 0.0, 0.5], tableau=tab, projection=proj, h=1.0, steps=1)
+    assert admission(tab, "none") is None and admission(tab, "standard") is None
+    f = tmp_path / "theta34.toml"
+    f.write_text('a = [["3/4"]]\nb = ["1"]\nc = ["3/4"]\n')
+    assert [c.projection for c in audit.candidates_from(str(f))] == ["none", "standard"]
+    with pytest.raises(SceneError, match=r"needs \|R\(∞\)\| = 1 but RadIIA2"):
+        parse_scene(GC.replace('tableaus = ["GLRK2"]', 'tableaus = ["RadIIA2"]').replace(
+            '"symmetric", "symplectic"', '"standard", "symplectic"'))
