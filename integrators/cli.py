@@ -22,6 +22,7 @@ import dataclasses
 import os
 import signal
 import sys
+import time
 
 import numpy as np
 
@@ -33,12 +34,11 @@ class Terminated(BaseException):
 
 
 def _on_signal(signum, frame):
-    """Raise at once, and also leave the exception with the driver, which raises it again at the next
-    step: a signal that lands inside an object destructor (h5py's) would otherwise be swallowed."""
+    """Leave the exception with the driver, which raises it before its next step.  Raising here
+    instead would land wherever Python happens to be, including inside object destructors and
+    weakref callbacks (h5py's), where the exception is swallowed with a printed traceback."""
     from . import driver
-    exc = Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
-    driver.STOP.append(exc)
-    raise exc
+    driver.STOP.append(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
 
 
 def _rank() -> int:
@@ -62,6 +62,7 @@ def _abort_other_ranks(code):
     if MPI.Is_initialized() and not MPI.Is_finalized() and MPI.COMM_WORLD.Get_size() > 1:
         sys.stdout.flush()
         sys.stderr.flush()
+        time.sleep(0.5)        # let mpiexec forward this rank's last lines before Abort tears it down
         MPI.COMM_WORLD.Abort(code)
 
 

@@ -25,7 +25,12 @@ from .projections import Stepper
 from .tableaus import tableau as builtin_tableau
 
 
-STOP = []      # exceptions left by a signal handler (integrators.cli); raised again at the next step
+STOP = []      # exceptions left by a signal handler (integrators.cli); raised before the next step
+
+
+def _check_stop():
+    if STOP:
+        raise STOP.pop()
 
 
 class _Serial:
@@ -302,6 +307,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         for (tab_name, proj), job in zip(scene.pairs, todo):
             if job is None:
                 continue
+            _check_stop()
             offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, diagnostics,
                                        after_output, bar, timings, UNDER_RESOLVED)
         comm.Barrier()
@@ -362,8 +368,7 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, d
     if start_step == 0:
         _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
     for step in range(start_step + 1, scene.steps + 1):
-        if STOP:
-            raise STOP.pop()
+        _check_stop()
         t0 = time.perf_counter()
         advance(stepper, st, step * h)
         clock["advance"] += time.perf_counter() - t0
