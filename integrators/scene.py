@@ -5,7 +5,7 @@ A scene file::
     name = "my-run"                       # optional
     [system]
     name = "guiding_centre_symmetric"     # a built-in system
-    params = { mu = 0.01 }                # optional overrides
+    params = { mu = 0.01 }                # optional overrides; a vector whole: { gamma = [0.1, 0.2] }
 
     [loop]                                # optional: a closed loop of sample points
     shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function" returning (N, d)
@@ -182,8 +182,15 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     if sysd["name"] not in SYSTEM_NAMES:
         raise SceneError(f"system.name: unknown system '{sysd['name']}' (choose from {', '.join(SYSTEM_NAMES)})")
     params = dict(sysd.get("params", {}))
+    def finite(v):
+        return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+
     for k, v in params.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        if isinstance(v, list):          # a vector parameter given whole, as in Python: gamma = [0.1, 0.1]
+            if not v or not all(finite(x) for x in v):
+                raise SceneError(f"system.params.{k} must be a finite number or a list of them, got {v!r}")
+            params[k] = tuple(float(x) for x in v)
+        elif not finite(v):
             raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
     try:
         system = builtin_system(sysd["name"], **params)

@@ -544,3 +544,27 @@ def test_one_admission_rule_for_integrate_scenes_and_audit(tmp_path):
     with pytest.raises(SceneError, match=r"needs \|R\(∞\)\| = 1 but RadIIA2"):
         parse_scene(GC.replace('tableaus = ["GLRK2"]', 'tableaus = ["RadIIA2"]').replace(
             '"symmetric", "symplectic"', '"standard", "symplectic"'))
+
+
+def test_vector_parameters_in_scenes_as_in_python():
+    text = """
+[system]
+name = "point_vortices"
+params = { gamma = [0.2, 0.1] }
+[loop]
+shape = "ellipse"
+points = 16
+params = { d = 4, center = [1.0, 0.1, 1.0, -0.1], radii = [0.002, 0.002], plane = [0, 1] }
+[run]
+tableaus = ["GLRK2"]
+projections = ["symmetric"]
+h = 0.1
+steps = 2
+"""
+    sy = parse_scene(text).system()
+    assert sy.param_values == {"gamma1": 0.2, "gamma2": 0.1}
+    assert sy.param_values == integrators.system("point_vortices", gamma=(0.2, 0.1)).param_values
+    with pytest.raises(SceneError, match=r"system.params: .*'gamma' needs 2 values"):
+        parse_scene(text.replace("[0.2, 0.1]", "[0.2, 0.1, 0.3]"))
+    with pytest.raises(SceneError, match=r"system.params.gamma must be a finite number or a list"):
+        parse_scene(text.replace("[0.2, 0.1]", '[0.2, "x"]'))
