@@ -79,6 +79,7 @@ def _rel(v):
 
 def _grid(f, inv, form, out):
     tabs, projs = _pairs(f)
+    shaded = False
     fig, axes = plt.subplots(len(projs), len(tabs), figsize=(max(3.4 * len(tabs), 6.0), 2.3 * len(projs) + 0.6),
                              sharex=True, sharey=True, squeeze=False)
     for i, p in enumerate(projs):
@@ -93,7 +94,10 @@ def _grid(f, inv, form, out):
                     bad = _read(g, f"resolved/{inv}") == 0
                     for a, b in _stretches(times, bad):
                         ax.axvspan(a, b, color="0.6", alpha=0.35, lw=0, label="under-resolved")
+                        shaded = True
                 status = g.attrs.get("status", "")
+                if status == "under-resolved" and f"under_resolved_from/{inv}" not in g.attrs:
+                    status = ""                     # the other set is the under-resolved one
                 if status not in ("ok", ""):
                     ax.text(0.02, 0.9, str(status), transform=ax.transAxes, fontsize=7, color="C3")
             ax.grid(True, which="major", lw=0.3)
@@ -106,7 +110,8 @@ def _grid(f, inv, form, out):
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylim(FLOOR / 2, None)
     fig.suptitle(f"{'first' if inv == 'I1' else 'second'} Poincaré invariant {inv}, {form} form: "
-                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|\n(grey: the set is under-resolved there)", fontsize=10)
+                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|" + ("\n(grey: the set is under-resolved there)" if shaded else ""),
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
