@@ -9,10 +9,12 @@ Public API::
     sol = integrators.integrate(sys, q0, tableau=tab, projection="symmetric", h=0.1, steps=1000)
 """
 from .integrate import Solution, integrate
-from .projections import PROJECTIONS, Stepper
+from .engine import Engine, State, march, set_threads
+from .projections import PROJECTIONS
 from .systems import SYSTEM_NAMES, System, system, system_from
 from .tableaus import TABLEAU_NAMES, Tableau, tableau, tableau_from_arrays, tableau_from_file
 
 __all__ = ["integrate", "Solution", "system", "system_from", "System", "SYSTEM_NAMES", "tableau",
-           "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Stepper"]
+           "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Engine", "State", "march",
+           "set_threads"]
 __version__ = "0.1.0"

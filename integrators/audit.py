@@ -56,7 +56,7 @@ from typing import Callable
 
 import numpy as np
 
-from .newton import COMPLEX_STEP as CS_STEP
+from .kernel import COMPLEX_STEP as CS_STEP
 
 ROUNDOFF = 1e-11        # max relative invariant error still called round-off
 DRIFT_RATIO = 2.0       # last-quarter mean / first-quarter max above which an error drifts
@@ -82,25 +82,25 @@ class Candidate:
 def stepper_map(tableau, projection) -> Callable:
     """The step map of a (tableau, projection) pair as a pure batched function.
 
-    One call is one step from the vector-field guess (no history): the Newton solution does
-    not depend on the guess beyond its tolerance.  Accepts complex arrays (complex step).
+    One call is one step of the compiled engine from the vector-field guess (no history): the
+    Newton solution does not depend on the guess beyond its tolerance.  Accepts complex arrays:
+    the engine's complex128 specialisation carries the derivatives (complex step) through the
+    Newton solve.  A point whose step fails is NaN.
     """
-    from .projections import Stepper
+    from .engine import Engine
     cache = {}
 
     def step(q, p, lam, h, system):
         key = (id(system), float(h))
         if key not in cache:
-            cache[key] = Stepper(system, tableau, projection, h)
-        st = cache[key]
+            cache[key] = Engine(system, tableau, projection, h)
+        engine = cache[key]
         q, p, lam = (np.asarray(x) for x in (q, p, lam))
-        with np.errstate(all="ignore"):
-            Y0 = st.first_guess(q)      # complex q: the guess carries its derivative too
-            res = st.step(q, p, h * lam, Y0, np.zeros_like(q))
-            q1 = q + res.inc_q
-            p1 = res.p if res.inc_p is None else p + res.inc_p
-            lam1 = res.Lam / h
-        bad = ~res.ok
+        dtype = np.complex128 if any(np.iscomplexobj(x) for x in (q, p, lam)) else np.float64
+        st = engine.state(q, p, lam, dtype=dtype)
+        engine.advance(st, 1, 1)
+        q1, p1, lam1 = st.q, st.p, st.Lam / h
+        bad = ~st.live
         for x in (q1, p1, lam1):
             x[bad] = np.nan
         return q1, p1, lam1
@@ -340,36 +340,40 @@ def run_drift(cand: Candidate, scene, progress=None):
     diag = Diagnostics(scene, system, q0)
     q, p, lam = q0.copy(), system.theta(q0), np.zeros_like(q0)
     live = np.ones(q0.shape[0], dtype=bool)
-    stepper = state = None
-    if cand.kind == "pair":
-        from .integrate import State, advance
-        from .projections import Stepper
-        stepper = Stepper(system, cand.tableau, cand.projection, h)
-        state = State(q0, p, lam, h, cand.tableau.s)
     rows, first_break = [diag.row(0.0, q, p, lam, live)], None
-    for k in range(1, scene.steps + 1):
-        if state is not None:
-            advance(stepper, state, k * h)
-            q, p, lam, live = state.q, state.p, state.Lam / h, state.live
-        elif live.any():
-            with np.errstate(all="ignore"):
-                try:
-                    q1, p1, l1 = _call(cand.step, q[live], p[live], lam[live], h, system)
-                except Exception as exc:     # the user's map raised: every point stops here
-                    print(f"audit: {cand.name} raised {type(exc).__name__}: {exc} at step {k}", file=sys.stderr)
-                    q1 = np.full_like(q[live], np.nan)
-                    p1, l1 = q1, q1
-            good = np.all(np.isfinite(q1) & np.isfinite(p1) & np.isfinite(l1), axis=1)
-            good &= system.in_domain(np.where(np.isfinite(q1), q1, 0.0))
-            idx = np.flatnonzero(live)
-            q[idx[good]], p[idx[good]], lam[idx[good]] = q1[good], p1[good], l1[good]
-            live[idx[~good]] = False
-        if first_break is None and not live.all():
-            first_break = k
-        if k % scene.output_every == 0:
-            rows.append(diag.row(k * h, q, p, lam, live))
-        if progress:
-            progress(k)
+    if cand.kind == "pair":           # the compiled engine's time loop, as a batch run takes it
+        from .engine import Engine, march
+        engine = Engine(system, cand.tableau, cand.projection, h)
+        state = engine.state(q0, p, lam)
+
+        def on_output(k):
+            rows.append(diag.row(k * h, state.q, state.p, state.Lam / h, state.live))
+
+        march(engine, state, 0, scene.steps, scene.output_every, on_output, progress)
+        broke = np.isfinite(state.breakdown_time)
+        if broke.any():
+            first_break = int(round(float(np.min(state.breakdown_time[broke])) / h))
+    else:                             # a user's step map, called on the live points
+        for k in range(1, scene.steps + 1):
+            if live.any():
+                with np.errstate(all="ignore"):
+                    try:
+                        q1, p1, l1 = _call(cand.step, q[live], p[live], lam[live], h, system)
+                    except Exception as exc:     # the user's map raised: every point stops here
+                        print(f"audit: {cand.name} raised {type(exc).__name__}: {exc} at step {k}", file=sys.stderr)
+                        q1 = np.full_like(q[live], np.nan)
+                        p1, l1 = q1, q1
+                good = np.all(np.isfinite(q1) & np.isfinite(p1) & np.isfinite(l1), axis=1)
+                good &= system.in_domain(np.where(np.isfinite(q1), q1, 0.0))
+                idx = np.flatnonzero(live)
+                q[idx[good]], p[idx[good]], lam[idx[good]] = q1[good], p1[good], l1[good]
+                live[idx[~good]] = False
+            if first_break is None and not live.all():
+                first_break = k
+            if k % scene.output_every == 0:
+                rows.append(diag.row(k * h, q, p, lam, live))
+            if progress:
+                progress(k)
     t = np.array([r["t"] for r in rows])
     resolution = {key[len("resolution/"):]: float(np.nanmax([r[key] for r in rows]))
                   for key in rows[0] if key.startswith("resolution/")}

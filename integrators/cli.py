@@ -111,16 +111,21 @@ def cmd_run(args) -> int:
         if args.steps < 1:
             raise ValueError(f"--steps must be a positive integer, got {args.steps}")
         scene = scene.with_steps(args.steps)
+    if args.threads is not None and args.threads < 1:
+        raise ValueError(f"--threads must be a positive integer, got {args.threads}")
+    from .driver import default_threads
+    threads = args.threads or default_threads(comm)
     if comm.rank == 0:
         npts = (scene.loop["points"] if scene.loop else 0) + (
             scene.surface["n_sigma"] * scene.surface["n_tau"] if scene.surface else 0)
         print(f"scene '{scene.name}': {scene.system_name}, {npts} points, {len(scene.pairs)} pairs, "
               f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
-              f"{comm.size} rank{'s' if comm.size > 1 else ''}", flush=True)
+              f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
+              flush=True)
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
-                    progress=False if args.quiet else None, version=__version__)
+                    progress=False if args.quiet else None, version=__version__, threads=threads)
     if comm.rank == 0:
         return _print_summary(summaries, out)
     return EXIT_OK
@@ -207,6 +212,9 @@ def build_parser():
     run.add_argument("--force", action="store_true", help="overwrite an existing output file")
     run.add_argument("--steps", type=int, default=None,
                      help="override the scene's run.steps (with --resume: extend a finished run)")
+    run.add_argument("--threads", type=int, default=None,
+                     help="threads over points per rank (default: the node's cores shared among its ranks; "
+                          "the numbers are bitwise the same for any count)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=cmd_run)
     au = sub.add_parser("audit", help="which symplectic forms does an integrator preserve?",

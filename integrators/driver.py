@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import output
-from .integrate import State, advance
-from .projections import Stepper
+from .engine import Engine, State, march, set_threads
 from .tableaus import tableau as builtin_tableau
 
 
@@ -133,17 +132,6 @@ def _balance(stats, clock):
     return offload, (speed if np.all(np.isfinite(speed)) else None)
 
 
-def _state_dict(st: State):
-    return {name: getattr(st, name) for name in output.STATE_FIELDS}
-
-
-def _state_from(d, lo, hi, h, s):
-    st = State(d["q"][lo:hi], d["p"][lo:hi], d["Lam"][lo:hi] / h, h, s)
-    for name in output.STATE_FIELDS:
-        setattr(st, name, np.array(d[name][lo:hi]))
-    return st
-
-
 def _concat(parts):
     return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
 
@@ -234,8 +222,19 @@ def _resume_plan(path, scene):
     return None
 
 
-def run(scene, path, *, resume=False, force=False, comm=None, progress=None, version="0", after_output=None):
+def default_threads(comm) -> int:
+    """Threads per rank: the cores of this node shared among its ranks (MPICH's MPI_LOCALNRANKS, else
+    every rank counts as local)."""
+    local = int(os.environ.get("MPI_LOCALNRANKS", comm.size) or comm.size)
+    return max(1, (os.cpu_count() or 1) // max(1, local))
+
+
+def run(scene, path, *, resume=False, force=False, comm=None, progress=None, version="0", after_output=None,
+        threads=None):
     """Run every pair of ``scene`` and write ``path``; returns a list of PairSummary (rank 0) or None.
+
+    threads : threads over points on each rank (default: :func:`default_threads`); the numbers are
+        bitwise the same for any count.
 
     resume : continue the pairs of an interrupted file, or extend a finished one when only
         ``run.steps`` grew (the result is bitwise the run of the longer scene).
@@ -245,6 +244,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     comm = comm or communicator()
     rank = comm.rank
     path = Path(path)
+    set_threads(threads or default_threads(comm))
     error, grown_from = None, None
     if rank == 0:
         error = _check_output(path, resume, force)
@@ -353,31 +353,35 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, d
     name = output.pair_name(tab_name, proj)
     start_step, saved = job
     tab = builtin_tableau(tab_name)
-    stepper = Stepper(system, tab, proj, h)
+    engine = Engine(system, tab, proj, h)
     blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
     lo, hi = blocks[rank]
     if saved is None:
-        st = State(q0[lo:hi], system.theta(q0[lo:hi]), np.zeros((hi - lo, system.d)), h, tab.s)
+        st = engine.state(q0[lo:hi])
     else:
         saved = comm.bcast(saved if rank == 0 else None, root=0)
-        st = _state_from(_unpad(saved, tab.s), lo, hi, h, tab.s)
+        st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, tab.s).items()}, h)
     g = f["runs"][name] if rank == 0 else None
     wall0 = float(g["wall_clock"][0]) if rank == 0 else 0.0
     t_start = time.perf_counter()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
     if start_step == 0:
         _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
-    for step in range(start_step + 1, scene.steps + 1):
-        _check_stop()
-        t0 = time.perf_counter()
-        advance(stepper, st, step * h)
-        clock["advance"] += time.perf_counter() - t0
-        if step % scene.output_every == 0:
-            if rank == 0:
-                g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
-            _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
+
+    def on_output(step):
         if rank == 0:
-            bar.update(1, name)
+            g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
+        _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
+
+    done = [start_step]
+
+    def progress(step):
+        if rank == 0:
+            bar.update(step - done[0], name)
+        done[0] = step
+
+    clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
+                              _check_stop)
     timings[name] = clock
     stats = comm.gather((clock["advance"], hi - lo), root=0)
     if rank != 0:
@@ -414,7 +418,7 @@ def _output(comm, f, g, scene, diagnostics, st, step, h, s, after_output, name, 
     # a resumed run (which has no Jacobians to carry) is bitwise the uninterrupted one
     st.forget_jacobians()
     t0 = time.perf_counter()
-    parts = comm.gather(_state_dict(st), root=0)
+    parts = comm.gather(st.checkpoint(), root=0)
     if comm.rank != 0:
         clock["gather"] += time.perf_counter() - t0
         return

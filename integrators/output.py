@@ -43,11 +43,12 @@ import re
 import h5py
 import numpy as np
 
+from .engine import CHECKPOINT_FIELDS
+
 FORMAT = "poincare/2"
 STATUSES = ("pending", "ok", "under-resolved", "partial", "failed")
 FINISHED = ("ok", "under-resolved", "partial", "failed")
-STATE_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
-                "iterations", "steps")
+STATE_FIELDS = CHECKPOINT_FIELDS         # the engine's State defines the checkpoint schema
 
 
 def pair_name(tableau, projection):

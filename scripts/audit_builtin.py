@@ -16,7 +16,7 @@ import numpy as np
 
 import integrators
 from integrators import audit
-from integrators.projections import Stepper
+from integrators.engine import Engine
 from integrators.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,13 +39,16 @@ def midpoint_with_sign(tab, sigma):
 
     def step(q, p, lam, h, system):
         if h not in cache:
-            cache[h] = Stepper(system, tab, "midpoint", h)
-            cache[h].sigma = sigma
-        st = cache[h]
-        res = st.step(q, p, h * lam, st.first_guess(q), np.zeros_like(q))
-        q1 = q + res.inc_q
-        q1[~res.ok] = np.nan
-        return q1, res.p, res.Lam / h
+            eng = Engine(system, tab, "midpoint", h)
+            eng.codes = eng.codes[:4] + (float(sigma),) + eng.codes[5:]     # (pre, pre_at, post, post_at, σ, lobatto)
+            cache[h] = eng
+        eng = cache[h]
+        dtype = np.complex128 if np.iscomplexobj(q) else np.float64
+        st = eng.state(q, p, lam, dtype=dtype)
+        eng.advance(st, 1, 1)
+        q1 = st.q.copy()
+        q1[~st.live] = np.nan
+        return q1, st.p, st.Lam / h
     return step
 
 

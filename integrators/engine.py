@@ -1,0 +1,297 @@
+"""The compiled step engine: the per-point state, the one time loop, and the system's point functions.
+
+Every run — :func:`integrators.integrate`, the MPI driver, ``poincare audit`` and the scripts —
+advances points through :class:`Engine` and :func:`march`:
+
+* :class:`State` owns everything a point carries from step to step.  Its
+  :data:`CHECKPOINT_FIELDS` are the checkpoint schema of the HDF5 files; the Newton factors it
+  also keeps are dropped at every output (:meth:`State.forget_jacobians`), so a run resumed from
+  a checkpoint is bitwise the run it continues.
+* :class:`Engine` is one (tableau, projection) pair for a system and a step size.  The tableau
+  and the projection are runtime data of the compiled kernel (:mod:`integrators.kernel`): one
+  compilation serves every pair and every system.
+* The system enters as two small compiled functions generated from its symbolic ϑ and H
+  (:func:`point_functions`): ϑ, ϑ_q, ∇H and, for Jacobians, ϑ_qq and ∇²H at one point, with
+  common subexpressions shared, and the domain test.  Their source is written to an on-disk cache
+  keyed by the expressions and numba compiles it once per machine (``cache=True``); parameter
+  values are runtime data, so ``with_params`` compiles nothing.
+
+The cache lives in ``$POINCARE_CACHE`` or else ``$XDG_CACHE_HOME/poincare`` (``~/.cache/poincare``);
+deleting it is always safe.  Threads: :func:`set_threads` (numba's pool; results are bitwise the
+same for any count).
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import itertools
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .projections import admission, projection_record
+
+CODEGEN_VERSION = "2"          # bump when the generated source changes shape
+BLOCK = 64                     # points per block of the kernel's thread loop (any value gives the same bits)
+
+CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
+                     "iterations", "steps")
+
+
+def cache_dir() -> Path:
+    """Where generated kernels and numba's compiled code are kept."""
+    root = os.environ.get("POINCARE_CACHE")
+    if root:
+        return Path(root)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "poincare"
+
+
+def set_threads(n: int | None):
+    """Use ``n`` threads over points (None: numba's default, every core)."""
+    import numba
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS if n is None else max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+
+
+def get_threads() -> int:
+    import numba
+    return numba.get_num_threads()
+
+
+# -- generated point functions -----------------------------------------------------------------
+
+def _key(system) -> str:
+    """Hash of what the generated source depends on: coordinates, parameter order, ϑ, H, domain."""
+    import numba
+    import sympy
+    parts = [CODEGEN_VERSION, numba.__version__, sys.version.split()[0],
+             sympy.srepr(tuple(system.q)), sympy.srepr(tuple(system.params)),
+             sympy.srepr(tuple(system.theta_expr)), sympy.srepr(system.H_expr), sympy.srepr(tuple(system.domain_expr))]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
+
+
+def _body(exprs, targets, qsyms, params, indent):
+    """Lines assigning ``targets[i] = exprs[i]`` with shared common subexpressions."""
+    import sympy
+    from .systems import _Printer
+    subs, reduced = sympy.cse(list(exprs), symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
+                              optimizations="basic")
+    names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
+    names.update({k: f"_k{i}" for i, k in enumerate(params)})
+    names.update({sym: f"_x{i}" for i, (sym, _) in enumerate(subs)})
+    pr = _Printer(names)
+    pad = " " * indent
+    lines = [f"{pad}{names[sym]} = {pr.doprint(e)}" for sym, e in subs]
+    lines += [f"{pad}{t} = {pr.doprint(e)}" for t, e in zip(targets, reduced)]
+    return lines
+
+
+def generate_source(system) -> str:
+    """The Python source of a system's compiled point functions: ``evaluate_real``,
+    ``evaluate_complex`` (the same body, for the audit's complex-step derivatives) and ``inside``."""
+    d = system.d
+    q, params = system.q, list(system.params)
+    th = [(f"_th[{i}]", system.theta_expr[i]) for i in range(d)]
+    T = [(f"_T[{i * d + j}]", system.dtheta_expr[i][j]) for i in range(d) for j in range(d)]
+    dH = [(f"_dH[{i}]", system.dH_expr[i]) for i in range(d)]
+    TT = [(f"_TT[{(i * d + j) * d + l}]", system.ddtheta_expr[i][j][l])
+          for i in range(d) for j in range(d) for l in range(d)]
+    HH = [(f"_HH[{i * d + j}]", system.ddH_expr[i][j]) for i in range(d) for j in range(d)]
+    head = [f"    _q{i} = _qin[{i}]" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
+    light, full = th + T + dH, th + T + dH + TT + HH
+    body = ["    if _need:", *_body([e for _, e in full], [t for t, _ in full], q, params, 8),
+            "    else:", *_body([e for _, e in light], [t for t, _ in light], q, params, 8)]
+    lines = [f'"""Generated by integrators.engine for the system {system.name!r}; do not edit."""',
+             "import numpy", "from numba import cfunc, types", "", "_F = types.CPointer(types.float64)"]
+    for name, A in (("evaluate_real", "float64"), ("evaluate_complex", "complex128")):
+        lines += ["", f"_A = types.CPointer(types.{A})",
+                  "@cfunc(types.void(_A, _F, types.boolean, _A, _A, _A, _A, _A), cache=True,",
+                  "       error_model='numpy')",
+                  f"def {name}(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *head, *body, ""]
+    lines += ["", "@cfunc(types.boolean(_F, _F), cache=True, error_model='numpy')",
+              "def inside(_qin, _k):",
+              f"    for _i in range({d}):",
+              "        if not numpy.isfinite(_qin[_i]):",
+              "            return False"]
+    if system.domain_expr:
+        g = [(f"_g{i}", e) for i, e in enumerate(system.domain_expr)]
+        lines += head + _body([e for _, e in g], [t for t, _ in g], q, params, 4)
+        lines += [f"    if not ({t} > 0):\n        return False" for t, _ in g]
+    lines += ["    return True", ""]
+    return "\n".join(lines)
+
+
+_LOADED = {}
+
+
+def _load(system):
+    key = _key(system)
+    if key in _LOADED:
+        return _LOADED[key]
+    folder = cache_dir() / "kernels"
+    path = folder / f"system_{key}.py"
+    if not path.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f".system_{key}.{os.getpid()}.tmp"
+        tmp.write_text(generate_source(system))
+        os.replace(tmp, path)           # atomic: MPI ranks generating together never see half a file
+    spec = importlib.util.spec_from_file_location(f"poincare_system_{key}", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod         # numba's cache finds a function's module by name
+    spec.loader.exec_module(mod)
+    _LOADED[key] = mod
+    return mod
+
+
+def point_functions(system, complex_step=False):
+    """The compiled (evaluate, inside) pair of ``system`` (generated and compiled once per machine)."""
+    mod = _load(system)
+    return (mod.evaluate_complex if complex_step else mod.evaluate_real), mod.inside
+
+
+# -- the state and the engine --------------------------------------------------------------------
+
+class State:
+    """The per-point state of a run (leading points axis on every array).
+
+    ``q, p`` positions and momenta (p as the method computes it); ``Lam`` = hλ of the last step;
+    ``q_comp, p_comp`` compensated-summation terms; ``Y`` (n, s, d) the last step's stage
+    displacements and ``mu`` its Lobatto multiplier (the next step's guesses); ``have_history``
+    whether a point has taken a step; ``live`` whether it has not broken down; ``breakdown_time``
+    (inf if never); ``iterations`` Newton iterations summed; ``steps`` steps taken.  These are
+    :data:`CHECKPOINT_FIELDS`.  The Newton factors ``lu, piv`` (valid where ``have_lu``) are not:
+    :meth:`forget_jacobians` at every checkpoint.
+    """
+
+    def __init__(self, q, p, lam, h, s, dtype=np.float64):
+        q = np.asarray(q)
+        n, d = q.shape
+        dt = np.dtype(dtype)
+        self.q = np.array(q, dtype=dt, order="C")
+        self.p = np.array(p, dtype=dt, order="C")
+        self.Lam = np.ascontiguousarray(h * np.asarray(lam, dtype=dt))
+        self.q_comp = np.zeros((n, d), dt)
+        self.p_comp = np.zeros((n, d), dt)
+        self.Y = np.zeros((n, s, d), dt)
+        self.mu = np.zeros((n, d), dt)
+        self.have_history = np.zeros(n, dtype=bool)
+        self.live = np.ones(n, dtype=bool)
+        self.breakdown_time = np.full(n, np.inf)
+        self.iterations = np.zeros(n, dtype=np.int64)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.lu = np.empty((n, 0, 0), dt)
+        self.piv = np.empty((n, 0), np.int64)
+        self.have_lu = np.zeros(n, dtype=bool)
+
+    @classmethod
+    def from_checkpoint(cls, fields, h):
+        """A state from the :data:`CHECKPOINT_FIELDS` of a checkpoint (arrays copied)."""
+        st = cls(fields["q"], fields["p"], np.zeros_like(fields["q"]), h, fields["Y"].shape[1])
+        for name in CHECKPOINT_FIELDS:
+            setattr(st, name, np.ascontiguousarray(fields[name]).copy())
+        return st
+
+    def checkpoint(self) -> dict:
+        return {name: getattr(self, name) for name in CHECKPOINT_FIELDS}
+
+    def forget_jacobians(self):
+        """Start every point's next solve from a fresh Jacobian (done at every checkpoint)."""
+        self.have_lu[:] = False
+
+    def _tuple(self, nz):
+        if self.lu.shape[1] != nz:
+            n = self.q.shape[0]
+            self.lu = np.empty((n, nz, nz), self.q.dtype)
+            self.piv = np.empty((n, nz), np.int64)
+            self.have_lu[:] = False
+        u8 = lambda x: x.view(np.uint8)
+        return (self.q, self.p, self.Lam, self.q_comp, self.p_comp, self.Y, self.mu, u8(self.have_history),
+                u8(self.live), self.breakdown_time, self.iterations, self.steps, self.lu, self.piv, u8(self.have_lu))
+
+
+class Engine:
+    """The step map Φ_h of one (tableau, projection) pair for a system, compiled.
+
+    ``advance(state, first, nsteps)`` advances every live point of ``state`` by ``nsteps`` steps.
+    """
+
+    def __init__(self, system, tableau, projection, h):
+        why = admission(tableau, projection)
+        if why:
+            raise ValueError(why)
+        self.system, self.tableau, self.h = system, tableau, float(h)
+        self.projection = projection
+        rec = projection_record(projection)
+        s, d = tableau.s, system.d
+        lob = tableau.d is not None
+        self.codes = rec.codes(tableau) + (lob,)
+        self.nz = (s + (1 if rec.coupled else 0) + (1 if lob else 0)) * d
+        E = _lagrange_matrix(tableau.c - 1.0, tableau.c)
+        parts = (tableau.a, tableau.a_lo, tableau.abar, tableau.abar_lo, tableau.b, tableau.b_lo,
+                 tableau.d if lob else np.zeros(s), E)
+        self.tab = np.concatenate([np.asarray(x, dtype=np.float64).ravel() for x in parts])
+        self.k = np.array([float(v) for v in system.params.values()], dtype=np.float64)
+        self._functions = {}
+
+    def state(self, q, p=None, lam=None, dtype=np.float64):
+        q = np.asarray(q)
+        p = self.system.theta(q) if p is None else p
+        lam = np.zeros_like(q) if lam is None else lam
+        return State(q, p, lam, self.h, self.tableau.s, dtype)
+
+    def advance(self, state, first, nsteps, t0=0.0, block=BLOCK):
+        """Steps number first … first + nsteps − 1 (step k aims at t0 + k·h) for every live point."""
+        from . import kernel
+        cplx = bool(np.iscomplexobj(state.q))
+        if cplx not in self._functions:
+            self._functions[cplx] = point_functions(self.system, cplx)
+        ev, inside = self._functions[cplx]
+        kernel.advance(ev, inside, self.k, self.tab, self.codes, self.h, float(t0), int(first), int(nsteps), cplx,
+                       int(block), state._tuple(self.nz), (0,) * self.system.d)
+
+
+def _lagrange_matrix(nodes, targets):
+    """E with E_ij = ℓ_j(targets_i) for the Lagrange basis on ``nodes``: the next step's stage guess
+    from the last step's stage values (nodes c_j − 1 extrapolated to c_i).  (Extrapolating from two
+    steps was tried: no gain for s ≥ 2, and it wrecks the guess for SRK3.)"""
+    E = np.ones((len(targets), len(nodes)))
+    for i, x in enumerate(targets):
+        for j, xj in enumerate(nodes):
+            for k, xk in enumerate(nodes):
+                if k != j:
+                    E[i, j] *= (x - xk) / (xj - xk)
+    return E
+
+
+def march(engine, state, start, stop, every, on_output=None, progress=None, check=None, t0=0.0, target=0.25,
+          block=BLOCK):
+    """The time loop: advance ``state`` from step ``start`` to ``stop``.
+
+    After every step that is a multiple of ``every`` the Newton factors are dropped (a checkpoint
+    may be written there) and ``on_output(step)`` is called.  The kernel is called for as many
+    steps as take about ``target`` seconds (never past an output), with ``progress(step)`` and
+    ``check()`` (which may raise to stop the run) between calls; how the steps are grouped
+    changes no bits.  Returns the seconds spent advancing.
+    """
+    step, batch, spent = start, 1, 0.0
+    while step < stop:
+        if check is not None:
+            check()
+        to_output = every - step % every
+        n = max(1, min(batch, to_output, stop - step))
+        t = time.perf_counter()
+        engine.advance(state, step + 1, n, t0, block)
+        dt = time.perf_counter() - t
+        spent += dt
+        step += n
+        batch = int(min(max(1, n * target / dt if dt > 0 else 2 * n), 4 * n, 1 << 20))
+        if step % every == 0:
+            state.forget_jacobians()
+            if on_output is not None:
+                on_output(step)
+        if progress is not None:
+            progress(step)
+    return spent
