@@ -23,7 +23,7 @@ depend on its batch, the thread count or the MPI rank count.  No fastmath.
 
 Inside a step the kernel works on raw pointers into one scratch buffer per thread (``_at``): numba
 reference-counts every array view it makes, and those atomic counts cost more than the arithmetic
-of a small step (profile in docs/benchmarks.md).
+of a small step; the small helpers are inlined at numba's level (profile in docs/benchmarks.md).
 """
 from __future__ import annotations
 
@@ -39,7 +39,11 @@ TOL = 4 * EPS           # converged when max |δ|/scale ≤ TOL
 STALL = 1e-10           # ... or when below STALL and the update no longer halves (round-off floor)
 STALL_COMPLEX = 1e-13   # complex step: a round-off floor counts only when it is a tight one
 MAXITER = 40
-REFRESH = 0.03          # a fresh Jacobian when an iteration contracted by less than this factor
+REFRESH = 0.01          # a fresh Jacobian when an iteration contracted by less than this factor.
+#                         (0.03 suited the numpy engine, whose Jacobians cost many numpy calls; compiled, a
+#                         fresh Jacobian is cheap enough that 0.01 is faster: GLRK1-none 8.0 -> 6.7 Newton
+#                         iterations per step and +9 % point-steps/s, GLRK2-symmetric 7.5 -> 6.5 and +3 %, on
+#                         guiding_centre_symmetric at h = 10; docs/benchmarks.md)
 
 # where ϑ and its derivatives were last evaluated (point-buffer slots; codes of the projections)
 START, MIDPOINT, END = 0, 1, 2
@@ -83,7 +87,7 @@ def _layout(s, d, nz):
 
 # -- small dense linear algebra ---------------------------------------------------------------
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def lu_factor(A, piv, n):
     """In-place LU of the n×n row-major A with partial pivoting (pivot chosen on the real part, so
     the complex-step specialisation pivots exactly as the real one).  A zero pivot is left in
@@ -110,7 +114,7 @@ def lu_factor(A, piv, n):
                     A[i * n + j] = A[i * n + j] - f * A[col * n + j]
 
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def lu_solve(A, piv, x, n):
     """Solve A x = b in place (x holds b on entry) with the factors of :func:`lu_factor`."""
     for i in range(n):
@@ -131,7 +135,7 @@ def lu_solve(A, piv, x, n):
         x[i] = acc / A[i * n + i]
 
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def _tapply(T, v, out, d):
     """out_m = Σ_l T[l, m] v_l  (ϑ_qᵀ v)."""
     for m in range(d):
@@ -141,7 +145,7 @@ def _tapply(T, v, out, d):
         out[m] = acc
 
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def _contract(TT, v, out, d):
     """out[m, n] = Σ_l TT[l, m, n] v_l  (∂(ϑ_qᵀ v)/∂q)."""
     dd = d * d
@@ -152,7 +156,7 @@ def _contract(TT, v, out, d):
         out[mn] = acc
 
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def _eval(ev, k, x, need, w, L, slot, d):
     """ϑ and its derivatives at x into point slot ``slot`` (START, MIDPOINT or END)."""
     dd = d * d
@@ -162,7 +166,7 @@ def _eval(ev, k, x, need, w, L, slot, d):
 
 # -- the step's equations ---------------------------------------------------------------------
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def _main(z, jac, r, J, ev, k, h, tb, proj, d, s, w, L):
     """Residual (and Jacobian into J) of the stage equations, with the coupled projection's Λ.
 
@@ -325,7 +329,7 @@ def _main(z, jac, r, J, ev, k, h, tb, proj, d, s, w, L):
                 J[(iM + m) * nz + i * d + m] = dv[i]
 
 
-@njit(**_OPTS)
+@njit(inline='always', **_OPTS)
 def _post(z, jac, r, J, ev, k, sig, d, w, L):
     """The consecutive projection: solve ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ for Λ
     (eq:orthogonal_projection, eq:symplectic_projection_post) with q̂, p̂ the step's q̄ + ΣbY, p̄ + ΣbG."""

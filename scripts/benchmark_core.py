@@ -139,6 +139,27 @@ def main():
     tracemalloc.stop()
     print(f"tracemalloc peak: {peak / n_mem:.0f} bytes per point at {n_mem} points", flush=True)
 
+    # the invariants (all three forms) next to one compiled GLRK2-symmetric step of the same points
+    loop = invariants.loop("guiding_centre", 2000)
+    surf = invariants.surface("guiding_centre", 100, 100)
+
+    def timed(f, reps=5):
+        f()
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            f()
+        return (time.perf_counter() - t0) / reps
+
+    lam_l, lam_s = 1e-3 * np.ones_like(loop), 1e-3 * np.ones_like(surf)
+    t_I1 = timed(lambda: [invariants.first_invariant(loop, fm, system=gc, p=gc.theta(loop), lam=lam_l, h=h)
+                          for fm in invariants.FORMS])
+    t_I2 = timed(lambda: [invariants.second_invariant(surf, fm, system=gc, p=gc.theta(surf), lam=lam_s, h=h)
+                          for fm in invariants.FORMS])
+    r_loop, _ = compiled_rate(gc, loop, "GLRK2", "symmetric", h, 10, 1)
+    r_surf, _ = compiled_rate(gc, surf.reshape(-1, 4), "GLRK2", "symmetric", h, 10, 1)
+    inv = dict(I1_all_forms_2000=t_I1, step_2000=2000 / r_loop, I2_all_forms_100x100=t_I2, step_10000=10000 / r_surf)
+    print("invariants vs one compiled GLRK2-symmetric step on one thread [s]:", inv, flush=True)
+
     pr = cProfile.Profile()
     pr.enable()
     integrators.integrate(gc, q, tableau="GLRK2", projection="symmetric", h=h, steps=20, save_every=5)
@@ -154,7 +175,8 @@ def main():
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(dict(meta=meta, rows=rows, single=single, tokamak=tokamak,
                                               startup=dict(empty_cache=first, cached=cached),
-                                              memory_bytes_per_point=peak / n_mem, profile=profile), indent=1))
+                                              memory_bytes_per_point=peak / n_mem, invariants=inv,
+                                              profile=profile), indent=1))
 
 
 if __name__ == "__main__":

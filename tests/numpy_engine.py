@@ -157,7 +157,7 @@ def apply_batched(M, r):
     return np.matmul(M, r[..., None])[..., 0]
 
 
-def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.03, jinv=None, known=None):
+def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=None, jinv=None, known=None):
     """Solve fun(idx, z)[0] = 0 for every row of z.
 
     Newton's method with the exact Jacobian, kept while it works: the Jacobian is evaluated
@@ -193,6 +193,8 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=0.03
     converged : (n,) bool, iterations : (n,) int
     extras : dict of (n, ...) arrays, ``fun``'s extras at that iterate
     """
+    if refresh is None:                      # the compiled kernel's policy, so the oracle takes its path
+        from integrators.kernel import REFRESH as refresh
     z = z0.copy()
     n, nz = z.shape
     complex_step = np.iscomplexobj(z)
