@@ -21,7 +21,6 @@ import numpy as np
 
 from . import output
 from .engine import Engine, State, march, set_threads
-from .tableaus import tableau as builtin_tableau
 
 
 STOP = []      # exceptions left by a signal handler (integrators.cli); raised before the next step
@@ -275,7 +274,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
                 f.attrs["steps"] = scene.steps
             else:
-                max_s = max(builtin_tableau(t).s for t in scene.tableaus)
+                max_s = max(scene.tableau(t).s for t in scene.tableaus)
                 f = output.create(path, scene, version, n, _state_shapes(n, system.d, max_s), UNDER_RESOLVED)
             for tab, proj in scene.pairs:
                 g = f["runs"][output.pair_name(tab, proj)]
@@ -352,7 +351,7 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, d
     n, h = q0.shape[0], scene.h
     name = output.pair_name(tab_name, proj)
     start_step, saved = job
-    tab = builtin_tableau(tab_name)
+    tab = scene.tableau(tab_name)
     engine = Engine(system, tab, proj, h)
     blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
     lo, hi = blocks[rank]

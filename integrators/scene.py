@@ -7,18 +7,33 @@ A scene file::
     name = "guiding_centre_symmetric"     # a built-in system
     params = { mu = 0.01 }                # optional overrides; a vector whole: { gamma = [0.1, 0.2] }
 
+    [system]                              # ... or your own, from ϑ and H alone (restricted parser)
+    name = "oscillator"                   # a label
+    coordinates = ["x", "y"]              # an even number of names
+    theta = ["-y/2", "x/2"]
+    H = "omega*(x^2 + y^2)/2"
+    params = { omega = 1.0 }              # every other name in the expressions
+    symmetry = ["-y", "x"]                # optional: Noether momentum P = ϑ·V; or momentum = "..."
+    domain = ["x + 2"]                    # optional: expressions that must stay > 0
+
+    [system]                              # ... or a function returning an integrators.System
+    function = "mysys.py:make"            # (or module:function; top-level system = "..." says the same)
+    params = { omega = 2.0 }              # passed to it as keyword arguments
+
     [loop]                                # optional: a closed loop of sample points
     shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function" returning (N, d)
     points = 2000
-    params = { rx = 0.5 }                 # optional shape parameters
+    params = { rx = 0.5 }                 # optional shape parameters; any system: shape = "ellipse" with
+                                          # params = { d = 2, center = [1.0, 1.0], radii = [0.04, 0.04], plane = [0, 1] }
 
     [surface]                             # optional: a surface of n_sigma × n_tau Chebyshev points
-    shape = "guiding_centre"              # or "module:function" / "file.py:function" taking (S, T), returning (nσ, nτ, d)
+    shape = "guiding_centre"              # or "rectangle" (params d, center, size, plane), or "module:function" /
+                                          # "file.py:function" taking (S, T), returning (nσ, nτ, d)
     n_sigma = 100
     n_tau = 100
 
     [run]
-    tableaus = ["GLRK1", "GLRK2", "SRK3"]
+    tableaus = ["GLRK1", "GLRK2", "SRK3"]  # built-in names or tableau TOML files (as `poincare audit` reads)
     projections = ["none", "standard", "symmetric", "symplectic", "midpoint"]
     h = 10.0
     steps = 1000
@@ -30,7 +45,10 @@ A scene file::
     [output]
     path = "my-run.h5"
 
-Every mistake is a :class:`SceneError` whose message names the key.
+Files named in a scene (tableaus, file.py:function) are looked up next to the scene file, then in
+the current directory.  Every mistake is a :class:`SceneError` whose message names the key; an
+expression that does not parse, an unknown name, an odd dimension or an Ω̄ that is singular at a
+sample point are refused before anything runs.
 """
 from __future__ import annotations
 
@@ -74,6 +92,8 @@ class Scene:
     output: str
     text: str
     base: str | None = None          # directory of the scene file: where a relative file.py:function is looked up
+    system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
+    tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
 
     @property
     def pairs(self):
@@ -91,7 +111,15 @@ class Scene:
         return self.steps // self.output_every + 1
 
     def system(self):
-        return builtin_system(self.system_name, **self.system_params)
+        """The scene's System: a built-in one, one from ϑ and H in the scene, or a user function's."""
+        return _make_system(self.system_spec or {"name": self.system_name}, self.system_params, self.base)
+
+    def tableau(self, label):
+        """The Tableau of a run.tableaus entry (by its pair label)."""
+        if label in self.tableau_files:
+            from .tableaus import tableau_from_file
+            return tableau_from_file(self.tableau_files[label])
+        return builtin_tableau(label)
 
     def loop_points(self):
         """(N, d) loop sample points or None."""
@@ -122,7 +150,8 @@ def _shape(spec, key, base=None):
 
 _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
-    "system": {"name": str, "params": dict},
+    "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
+               "momentum": str, "domain": list, "function": str},
     "loop": {"shape": str, "points": int, "params": dict},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict},
     "run": {"tableaus": list, "projections": list, "h": float, "steps": int, "output_every": int,
@@ -169,6 +198,8 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{origin}: not valid TOML: {exc}") from None
+    if isinstance(data.get("system"), str):       # system = "module:function"
+        data["system"] = {"function": data["system"]}
     _check_table(data, "")
     for sec in ("system", "run"):
         if sec not in data:
@@ -177,10 +208,18 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
         if sec in data:
             _check_table(data[sec], sec)
     sysd, run = data["system"], data["run"]
-    if "name" not in sysd:
-        raise SceneError("missing key 'system.name'")
-    if sysd["name"] not in SYSTEM_NAMES:
-        raise SceneError(f"system.name: unknown system '{sysd['name']}' (choose from {', '.join(SYSTEM_NAMES)})")
+    base = str(Path(origin).parent) if origin != "<scene>" else None
+    user = any(k in sysd for k in ("coordinates", "function"))
+    if not user:
+        if "name" not in sysd:
+            raise SceneError("missing key 'system.name' (or give system.coordinates, theta and H, or system = "
+                             "\"module:function\")")
+        if sysd["name"] not in SYSTEM_NAMES:
+            raise SceneError(f"system.name: unknown system '{sysd['name']}' (choose from {', '.join(SYSTEM_NAMES)}; "
+                             "or give system.coordinates, theta and H)")
+        for k in ("theta", "H", "symmetry", "momentum", "domain"):
+            if k in sysd:
+                raise SceneError(f"system.{k} needs system.coordinates (a built-in system brings its own)")
     params = dict(sysd.get("params", {}))
     def finite(v):
         return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
@@ -192,10 +231,8 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
             params[k] = tuple(float(x) for x in v)
         elif not finite(v):
             raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
-    try:
-        system = builtin_system(sysd["name"], **params)
-    except ValueError as exc:
-        raise SceneError(f"system.params: {exc}") from None
+    spec = {k: v for k, v in sysd.items() if k != "params"} if user else {}
+    system = _make_system(spec or {"name": sysd["name"]}, params, base)
     if "loop" not in data and "surface" not in data:
         raise SceneError("the scene needs a [loop] or a [surface] of sample points")
     loop = dict(data["loop"]) if "loop" in data else None
@@ -216,7 +253,7 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     for key in ("tableaus", "projections", "h", "steps"):
         if key not in run:
             raise SceneError(f"missing key 'run.{key}'")
-    tabs = _names(run["tableaus"], None, "run.tableaus", check=builtin_tableau)
+    tabs, tableau_files = _tableaus(run["tableaus"], base)
     projs = _names(run["projections"], PROJECTIONS, "run.projections")
     h = float(run["h"])
     if not math.isfinite(h) or h <= 0:
@@ -232,19 +269,121 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     if "momentum" in diags and not system.has_momentum:
         raise SceneError(f"run.diagnostics: system '{system.name}' has no Noether momentum")
     for t in tabs:
-        tab = builtin_tableau(t)
+        tab = builtin_tableau(t) if t not in tableau_files else _tableau_file(tableau_files[t])
         for p in projs:
             why = admission(tab, p)
             if why:
                 raise SceneError(f"run: {why}")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
     out = data.get("output", {}).get("path", f"{name}.h5")
-    scene = Scene(name=name, system_name=sysd["name"], system_params=params, loop=loop, surface=surface,
+    scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
-                  base=str(Path(origin).parent) if origin != "<scene>" else None)
+                  base=base, system_spec=spec, tableau_files=tableau_files)
     _check_points(scene, system)
     return scene
+
+
+def _make_system(spec, params, base):
+    """A System from a scene's [system] table: built-in by name, from ϑ and H, or a user function."""
+    if "function" in spec:
+        from .plugins import load_callable
+        from .systems import System
+        try:
+            fn = load_callable(spec["function"], "system", base)
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
+        try:
+            made = fn(**params)
+        except Exception as exc:          # the user's function may raise anything: one line naming it
+            raise SceneError(f"system '{spec['function']}' failed: {type(exc).__name__}: {exc}") from None
+        if not isinstance(made, System):
+            raise SceneError(f"system '{spec['function']}' must return an integrators.System, got {type(made).__name__}")
+        return made
+    if "coordinates" in spec:
+        return _system_from_table(spec, params)
+    try:
+        return builtin_system(spec["name"], **params)
+    except ValueError as exc:
+        raise SceneError(f"system.params: {exc}") from None
+
+
+def _system_from_table(spec, params):
+    """ϑ and H (and optionally a symmetry or momentum, and a domain) from the scene, through the
+    restricted parser (integrators.expressions): nothing in the file is ever executed."""
+    import sympy
+    from .systems import system_from
+    coords = spec["coordinates"]
+    if not coords or not all(isinstance(c, str) and c.isidentifier() for c in coords):
+        raise SceneError(f"system.coordinates must be a list of names, got {coords!r}")
+    if len(set(coords)) != len(coords):
+        raise SceneError("system.coordinates lists a name twice")
+    clash = sorted(set(coords) & set(params))
+    if clash:
+        raise SceneError(f"system.params.{clash[0]}: '{clash[0]}' is also a coordinate")
+    for key in ("theta", "H"):
+        if key not in spec:
+            raise SceneError(f"missing key 'system.{key}' (a system from system.coordinates needs theta and H)")
+    for key in ("theta", "symmetry", "domain"):
+        if key in spec and not all(isinstance(e, str) for e in spec[key]):
+            raise SceneError(f"system.{key} must be a list of expression strings, got {spec[key]!r}")
+    for key in ("theta", "symmetry"):
+        if key in spec and len(spec[key]) != len(coords):
+            raise SceneError(f"system.{key} has {len(spec[key])} entries for {len(coords)} coordinates")
+    if "symmetry" in spec and "momentum" in spec:
+        raise SceneError("give system.symmetry or system.momentum, not both")
+    for k, v in params.items():
+        if isinstance(v, tuple):
+            raise SceneError(f"system.params.{k}: a system from expressions takes numbers, got a list")
+    q = [sympy.Symbol(c, real=True) for c in coords]
+    pars = {sympy.Symbol(k, real=True): float(v) for k, v in params.items()}
+    try:
+        return system_from(spec["theta"], spec["H"], q, name=spec.get("name", "user"), params=pars,
+                           symmetry=spec.get("symmetry"), domain=spec.get("domain", ()),
+                           momentum=spec.get("momentum"))
+    except ValueError as exc:
+        raise SceneError(str(exc).replace(f"system {spec.get('name', 'user')}: ", "system.")) from None
+
+
+def _tableau_file(path):
+    from .tableaus import tableau_from_file
+    try:
+        return tableau_from_file(path)
+    except ValueError as exc:
+        raise SceneError(f"run.tableaus: {exc}") from None
+
+
+def _tableaus(entries, base):
+    """run.tableaus: built-in names and tableau TOML files (looked up next to the scene, then in the
+    current directory).  Returns the pair labels (a file's tableau is labelled by its name) and
+    {label: path} of the files."""
+    if not isinstance(entries, list) or not entries:
+        raise SceneError("'run.tableaus' must be a non-empty list")
+    labels, files = [], {}
+    for e in entries:
+        if not isinstance(e, str):
+            raise SceneError(f"'run.tableaus' must be a list of strings, got {e!r}")
+        if e.endswith(".toml"):
+            p = Path(e)
+            cands = [p] if p.is_absolute() else [*([Path(base) / p] if base else []), Path.cwd() / p]
+            found = next((c for c in cands if c.is_file()), None)
+            if found is None:
+                raise SceneError(f"run.tableaus: tableau file '{e}' not found "
+                                 f"(looked in {', '.join(str(c.parent) for c in cands)})")
+            label = _tableau_file(found).name
+            if not label or "/" in label or label in SYSTEM_NAMES:
+                raise SceneError(f"run.tableaus: '{e}' has the unusable name {label!r}")
+            files[label] = str(found.resolve())
+        else:
+            try:
+                builtin_tableau(e)
+            except ValueError as exc:
+                raise SceneError(f"run.tableaus: {exc}") from None
+            label = e
+        if label in labels:
+            raise SceneError(f"'run.tableaus' lists the tableau '{label}' twice")
+        labels.append(label)
+    return tuple(labels), files
 
 
 def _check_points(scene, system):
@@ -268,9 +407,19 @@ def _check_points(scene, system):
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise SceneError(f"{what}: point {k} = {q[k].tolist()} is not finite or outside the domain of {system.name}")
+        with np.errstate(all="ignore"):
+            cond = np.linalg.cond(system.Omega(q))
+        bad = ~(cond < 1e12)
+        if bad.any():                     # the equations of motion need Ω̄ invertible (eq:euler_lagrange_equations_matrix)
+            k = int(np.flatnonzero(bad)[0])
+            raise SceneError(f"{what}: Ω̄ = dϑ is singular at point {k} = {q[k].tolist()} (condition number "
+                             f"{cond[k]:.1e}); check system.theta")
 
 
-_KEYS = {"system_name": "system.name", "system_params": "system.params", "loop": "loop", "surface": "surface",
+# (a tableau file is compared by its label, the tableau's name: where the file lies may differ between
+# a run and its resume, which finds it next to the output or in the current directory)
+_KEYS = {"system_name": "system.name", "system_params": "system.params", "system_spec": "system",
+         "loop": "loop", "surface": "surface",
          "tableaus": "run.tableaus", "projections": "run.projections", "h": "run.h", "steps": "run.steps",
          "output_every": "run.output_every", "forms": "run.forms", "diagnostics": "run.diagnostics",
          "store_points": "run.store_points"}

@@ -105,7 +105,7 @@ class System:
     """
 
     def __init__(self, name, q, theta, H, params=None, symmetry=None, domain=(), defaults=None,
-                 momentum_name=None, flow=None):
+                 momentum_name=None, flow=None, momentum=None):
         self.name = name
         self._flow = flow
         self.q = tuple(q)
@@ -127,7 +127,12 @@ class System:
                          tuple(_expr(v, f"system {name}: symmetry[{i}]", known) for i, v in enumerate(symmetry)))
         self.momentum_expr = (None if self.symmetry is None
                               else sympy.expand(sum(t * v for t, v in zip(self.theta_expr, self.symmetry))))
-        self.momentum_name = momentum_name or ("P" if self.symmetry is not None else None)
+        if momentum is not None:            # a conserved quantity given directly (monitored like P)
+            self.momentum_expr = _expr(momentum, f"system {name}: momentum", known)
+            unknown = self.momentum_expr.free_symbols - set(self.q) - set(self.params)
+            if unknown:
+                raise ValueError(f"system {name}: momentum: no value for {', '.join(sorted(map(str, unknown)))}")
+        self.momentum_name = momentum_name or ("P" if self.momentum_expr is not None else None)
         self.domain_expr = tuple(_expr(g, f"system {name}: domain[{i}]", known) for i, g in enumerate(domain))
         self.defaults = dict(defaults or {})
 
@@ -234,7 +239,8 @@ class System:
                 raise ValueError(f"system {self.name}: unknown parameter '{key}' (has {', '.join(sorted(by_name))})")
             new[by_name[key]] = float(val)
         return System(self.name, self.q, self.theta_expr, self.H_expr, new, self.symmetry, self.domain_expr,
-                      self.defaults, self.momentum_name, self._flow)
+                      self.defaults, self.momentum_name, self._flow,
+                      None if self.symmetry is not None else self.momentum_expr)
 
     @property
     def has_exact_flow(self) -> bool:
@@ -255,7 +261,7 @@ class System:
         return f"System({self.name}, d={self.d}{', ' if p else ''}{p})"
 
 
-def system_from(theta, H, q, name="user", params=None, symmetry=None, domain=(), defaults=None):
+def system_from(theta, H, q, name="user", params=None, symmetry=None, domain=(), defaults=None, momentum=None):
     """A system from ϑ (list of sympy expressions), H and the coordinate symbols q.
 
     Example
@@ -265,7 +271,7 @@ def system_from(theta, H, q, name="user", params=None, symmetry=None, domain=(),
     """
     if len(q) % 2:
         raise ValueError(f"system {name}: dimension {len(q)} is odd; Ω̄ must be invertible (even d)")
-    return System(name, q, theta, H, params, symmetry, domain, defaults)
+    return System(name, q, theta, H, params, symmetry, domain, defaults, momentum=momentum)
 
 
 # ----------------------------------------------------------------------------

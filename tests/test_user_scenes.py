@@ -1,0 +1,158 @@
+"""A user's own system and tableau, written only in a scene file, run like a built-in one."""
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from integrators.cli import main as cli_main
+from integrators.scene import SceneError, parse_scene
+
+TABLEAU = '''name = "MyGL2"
+a = [["1/4", "1/4 - sqrt(3)/6"], ["1/4 + sqrt(3)/6", "1/4"]]
+b = ["1/2", "1/2"]
+c = ["1/2 - sqrt(3)/6", "1/2 + sqrt(3)/6"]
+'''
+
+SCENE = '''name = "anharmonic"
+[system]
+name = "anharmonic"
+coordinates = ["x", "y"]
+theta = ["-y*(1 + x^2 + y^2)/2", "x*(1 + x^2 + y^2)/2"]
+H = "omega*(x^2 + y^2)/2 + eps*(x^2 + y^2)^2"
+params = { omega = 1.0, eps = 0.1 }
+symmetry = ["-y", "x"]
+
+[loop]
+shape = "ellipse"
+points = 64
+params = { d = 2, center = [0.5, 0.0], radii = [0.01, 0.01] }
+
+[surface]
+shape = "rectangle"
+n_sigma = 12
+n_tau = 12
+params = { d = 2, center = [0.5, 0.0], size = [0.01, 0.01] }
+
+[run]
+tableaus = ["GLRK2", "my_gl2.toml"]
+projections = ["symmetric", "none"]
+h = 0.1
+steps = 200
+output_every = 10
+forms = ["canonical", "noncanonical"]
+'''
+
+
+def _poincare(*args, n=None, cwd=None):
+    exe = shutil.which("poincare") or str(Path(sys.executable).parent / "poincare")
+    cmd = [exe, *args]
+    if n:
+        cmd = [shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec"), "-n", str(n), *cmd]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=cwd)
+
+
+def _write(tmp_path, scene=SCENE):
+    (tmp_path / "my_gl2.toml").write_text(TABLEAU)
+    path = tmp_path / "user.toml"
+    path.write_text(scene)
+    return path
+
+
+@pytest.mark.mpi
+def test_a_system_and_a_tableau_from_the_scene_file_run_under_mpiexec(tmp_path):
+    """ϑ, H and a tableau written only as text: 2 ranks give the 1-rank file's bits, the TOML tableau
+    (strings parsed exactly, in extended precision) gives the built-in GLRK2's bits, the energy and
+    the Noether momentum are conserved to round-off, and the plots are drawn."""
+    scene = _write(tmp_path)
+    for n, out in ((None, "one.h5"), (2, "two.h5")):
+        r = _poincare("run", str(scene), "-o", str(tmp_path / out), "-q", n=n, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    with h5py.File(tmp_path / "one.h5") as a, h5py.File(tmp_path / "two.h5") as b:
+        assert sorted(a["runs"]) == ["GLRK2-none", "GLRK2-symmetric", "MyGL2-none", "MyGL2-symmetric"]
+        for pair in a["runs"]:
+            assert a["runs"][pair].attrs["status"] == "ok"
+            for key in ("I1/canonical", "I2/noncanonical", "energy_error", "checkpoint/a/q"):
+                assert np.array_equal(a["runs"][pair][key][()], b["runs"][pair][key][()]), (pair, key)
+        for key in ("I1/noncanonical", "energy_error", "checkpoint/a/q", "checkpoint/b/Y"):
+            assert np.array_equal(a[f"runs/GLRK2-symmetric/{key}"][()], a[f"runs/MyGL2-symmetric/{key}"][()])
+        g = a["runs/MyGL2-symmetric"]
+        assert np.max(g["energy_error"][()]) < 1e-12 and np.max(g["momentum_error"][()]) < 1e-12
+        assert g["t"].shape == (21,)
+    r = _poincare("plot", str(tmp_path / "two.h5"), "-o", str(tmp_path / "figs"))
+    assert r.returncode == 0, r.stderr
+    assert {p.name for p in (tmp_path / "figs").iterdir()} >= {"two_I1_canonical.png", "two_I2_noncanonical.png",
+                                                              "two_diagnostics.png"}
+
+
+def test_a_system_from_a_python_function(tmp_path, monkeypatch):
+    (tmp_path / "mysys.py").write_text(
+        "import sympy, integrators\n"
+        "def oscillator(omega=1.0):\n"
+        "    x, y = sympy.symbols('x y')\n"
+        "    return integrators.system_from([-y / 2, x / 2], omega * (x**2 + y**2) / 2, [x, y], name='osc')\n")
+    text = SCENE.replace(SCENE[SCENE.index("[system]"):SCENE.index("[loop]")],
+                         "[system]\nfunction = \"mysys.py:oscillator\"\nparams = { omega = 2.0 }\n\n")
+    text = text.replace('tableaus = ["GLRK2", "my_gl2.toml"]', 'tableaus = ["GLRK1"]')
+    text = text.replace('forms = ["canonical", "noncanonical"]', 'forms = ["canonical"]\ndiagnostics = ["energy"]')
+    path = tmp_path / "f.toml"
+    path.write_text(text)
+    monkeypatch.chdir(tmp_path)
+    from integrators.scene import load_scene
+    sc = load_scene(str(path))
+    sy = sc.system()
+    assert sy.name == "osc" and sy.H(np.array([1.0, 0.0])) == 1.0      # omega = 2 reached the function
+
+
+@pytest.mark.parametrize("change,msg", [
+    (('H = "omega*(x^2 + y^2)/2 + eps*(x^2 + y^2)^2"', 'H = "omega*(x^2 + z^2)"'), r"system\.H.*z"),
+    (('H = "omega*(x^2 + y^2)/2 + eps*(x^2 + y^2)^2"', 'H = "__import__(\'os\')"'), r"system\.H"),
+    (('H = "omega*(x^2 + y^2)/2 + eps*(x^2 + y^2)^2"', 'H = "x^^2"'), r"system\.H"),
+    (('coordinates = ["x", "y"]', 'coordinates = ["x", "y", "z"]'), r"theta has 2 entries for 3 coordinates"),
+    (('theta = ["-y*(1 + x^2 + y^2)/2", "x*(1 + x^2 + y^2)/2"]', 'theta = ["y", "x"]'), r"Ω̄ = dϑ is singular"),
+    (('params = { omega = 1.0, eps = 0.1 }', 'params = { omega = 1.0, eps = 0.1, x = 1.0 }'), r"system\.params\.x"),
+    (('H = "omega*(x^2 + y^2)/2 + eps*(x^2 + y^2)^2"\n', ''), r"system\.H"),
+    (('tableaus = ["GLRK2", "my_gl2.toml"]', 'tableaus = ["GLRK2", "nope.toml"]'), r"run\.tableaus.*nope\.toml"),
+    (('tableaus = ["GLRK2", "my_gl2.toml"]', 'tableaus = ["GLRK2", "my_gl2.toml", "my_gl2.toml"]'), r"twice"),
+])
+def test_bad_user_systems_and_tableaus_are_one_line_errors(tmp_path, change, msg):
+    path = _write(tmp_path, SCENE.replace(*change))
+    with pytest.raises(SceneError, match=msg):
+        parse_scene(path.read_text(), origin=str(path))
+
+
+def test_odd_dimension_is_refused(tmp_path):
+    text = SCENE.replace('coordinates = ["x", "y"]', 'coordinates = ["x", "y", "z"]')
+    text = text.replace('theta = ["-y*(1 + x^2 + y^2)/2", "x*(1 + x^2 + y^2)/2"]', 'theta = ["-y", "x", "0"]')
+    text = text.replace('symmetry = ["-y", "x"]', 'symmetry = ["-y", "x", "0"]')
+    path = _write(tmp_path, text)
+    with pytest.raises(SceneError, match="dimension 3 is odd"):
+        parse_scene(path.read_text(), origin=str(path))
+
+
+def test_cli_exit_2_for_a_bad_expression(tmp_path, capsys, monkeypatch):
+    path = _write(tmp_path, SCENE.replace('H = "omega*(x^2 + y^2)/2 + eps*(x^2 + y^2)^2"', 'H = "open(1)"'))
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(["run", str(path), "-o", str(tmp_path / "x.h5"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "system.H" in err[0]
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_user_scene_resumes_to_the_same_bits(tmp_path):
+    """Extending a finished run of the user scene (run.steps raised) gives the bits of one longer run:
+    the stored scene, system expressions and tableau file included, is recognised as the same."""
+    scene = _write(tmp_path)
+    r = _poincare("run", str(scene), "-o", str(tmp_path / "part.h5"), "-q", "--steps", "100", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = _poincare("run", str(scene), "-o", str(tmp_path / "part.h5"), "-q", "--resume", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = _poincare("run", str(scene), "-o", str(tmp_path / "full.h5"), "-q", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    with h5py.File(tmp_path / "part.h5") as a, h5py.File(tmp_path / "full.h5") as b:
+        for pair in b["runs"]:
+            for key in ("t", "I1/noncanonical", "I2/canonical", "energy_error", "checkpoint/a/q", "checkpoint/b/q"):
+                assert np.array_equal(a["runs"][pair][key][()], b["runs"][pair][key][()]), (pair, key)
