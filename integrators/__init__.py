@@ -10,11 +10,12 @@ Public API::
 """
 from .integrate import Solution, integrate
 from .engine import Engine, State, march, set_threads
+from .output import Run, read_run
 from .projections import PROJECTIONS
 from .systems import SYSTEM_NAMES, System, system, system_from
 from .tableaus import TABLEAU_NAMES, Tableau, tableau, tableau_from_arrays, tableau_from_file
 
 __all__ = ["integrate", "Solution", "system", "system_from", "System", "SYSTEM_NAMES", "tableau",
            "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Engine", "State", "march",
-           "set_threads"]
+           "set_threads", "read_run", "Run"]
 __version__ = "0.1.0"

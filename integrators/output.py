@@ -37,6 +37,7 @@ valid slot and drops any rows written after it.
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import re
 
@@ -294,3 +295,77 @@ def set_status(g, status, unresolved_from):
             g.attrs[key] = unresolved_from[inv][0]
         elif key in g.attrs:
             del g.attrs[key]
+
+
+@dataclasses.dataclass
+class PairRun:
+    """One (tableau, projection) pair of a run file, read into arrays (see :func:`read_run`).
+
+    t : (n,) output times; ``I1``/``I2`` : {form: (n,) values} (empty without a loop / surface);
+    ``resolution``/``resolved`` : {'I1'|'I2': (n,)} the sets' monitors and 0/1 flags;
+    ``errors`` : {'energy'|'momentum'|'constraint': (n,)} max over live points; ``breakdown_time`` :
+    (npoints,) inf where a point never broke down; ``points`` : {'loop'|'surface': array} when the scene
+    stored them; ``status``, ``wall_time``.
+    """
+
+    name: str
+    status: str
+    wall_time: float
+    t: np.ndarray
+    I1: dict
+    I2: dict
+    resolution: dict
+    resolved: dict
+    errors: dict
+    breakdown_time: np.ndarray
+    points: dict
+
+    def relative_error(self, inv="I1", form="noncanonical"):
+        """|I(t) − I(0)| / |I(0)| of one invariant and form."""
+        v = (self.I1 if inv == "I1" else self.I2)[form]
+        return np.abs(v - v[0]) / abs(v[0])
+
+
+@dataclasses.dataclass
+class Run:
+    """A run file read whole: ``scene`` (the TOML text it ran), ``system`` (its name), ``format``,
+    ``pairs`` {name: PairRun} by name; ``run['GLRK2-symmetric']`` is ``run.pairs[...]``."""
+
+    path: str
+    format: str
+    system: str
+    scene: str
+    steps: int
+    pairs: dict
+
+    def __getitem__(self, name):
+        return self.pairs[name]
+
+
+def read_run(path) -> Run:
+    """Read a ``poincare run`` file into arrays (the layout above; h5py underneath).
+
+    A damaged dataset (failed checksum) or a file that is not a run file is one :class:`DamagedFile`
+    naming it.  Pairs still ``pending`` are read as far as they got.
+    """
+    try:
+        with h5py.File(path, "r") as f:
+            fmt = f.attrs.get("format")
+            if fmt not in (FORMAT, "poincare/1"):
+                raise DamagedFile(f"'{path}' is not a poincare run file")
+            pairs = {}
+            for name, g in f["runs"].items():
+                def sets(key):
+                    return {k: g[key][k][...] for k in g[key]} if key in g else {}
+                pairs[name] = PairRun(
+                    name=name, status=str(g.attrs.get("status", "pending")),
+                    wall_time=float(g["wall_clock"][0]), t=g["t"][...], I1=sets("I1"), I2=sets("I2"),
+                    resolution=sets("resolution"), resolved=sets("resolved"),
+                    errors={k[:-len("_error")]: g[k][...] for k in g if k.endswith("_error")},
+                    breakdown_time=g["breakdown_time"][...], points=sets("points"))
+            return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
+                       scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
+    except DamagedFile:
+        raise
+    except (OSError, KeyError) as exc:
+        raise DamagedFile(f"cannot read '{path}': damaged or not a poincare run file ({plain_error(exc)})") from None

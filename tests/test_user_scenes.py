@@ -8,7 +8,9 @@ import h5py
 import numpy as np
 import pytest
 
+from integrators import read_run
 from integrators.cli import main as cli_main
+from integrators.output import DamagedFile
 from integrators.scene import SceneError, parse_scene
 
 TABLEAU = '''name = "MyGL2"
@@ -82,6 +84,14 @@ def test_a_system_and_a_tableau_from_the_scene_file_run_under_mpiexec(tmp_path):
         g = a["runs/MyGL2-symmetric"]
         assert np.max(g["energy_error"][()]) < 1e-12 and np.max(g["momentum_error"][()]) < 1e-12
         assert g["t"].shape == (21,)
+    run = read_run(tmp_path / "two.h5")        # the documented reader gives the file's arrays
+    with h5py.File(tmp_path / "two.h5") as b:
+        g = b["runs/MyGL2-none"]
+        p = run["MyGL2-none"]
+        assert p.status == "ok" and run.system == "anharmonic" and run.steps == 200
+        assert np.array_equal(p.t, g["t"][()]) and np.array_equal(p.I2["noncanonical"], g["I2/noncanonical"][()])
+        assert np.array_equal(p.errors["momentum"], g["momentum_error"][()])
+        assert p.relative_error("I1", "noncanonical").max() > 1e-9      # unprojected GLRK2 is not exact here
     r = _poincare("plot", str(tmp_path / "two.h5"), "-o", str(tmp_path / "figs"))
     assert r.returncode == 0, r.stderr
     assert {p.name for p in (tmp_path / "figs").iterdir()} >= {"two_I1_canonical.png", "two_I2_noncanonical.png",
@@ -156,3 +166,13 @@ def test_a_user_scene_resumes_to_the_same_bits(tmp_path):
         for pair in b["runs"]:
             for key in ("t", "I1/noncanonical", "I2/canonical", "energy_error", "checkpoint/a/q", "checkpoint/b/q"):
                 assert np.array_equal(a["runs"][pair][key][()], b["runs"][pair][key][()]), (pair, key)
+
+
+def test_read_run_refuses_a_file_that_is_not_a_run(tmp_path):
+    (tmp_path / "x.h5").write_bytes(b"not hdf5 at all")
+    with pytest.raises(DamagedFile, match="x.h5"):
+        read_run(tmp_path / "x.h5")
+    with h5py.File(tmp_path / "y.h5", "w") as f:
+        f["a"] = 1
+    with pytest.raises(DamagedFile, match="not a poincare run file"):
+        read_run(tmp_path / "y.h5")
