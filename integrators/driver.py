@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import output
-from .engine import Engine, State, march, set_threads
+from .engine import Engine, MapEngine, State, march, set_threads
 
 
 STOP = []      # exceptions left by a signal handler (integrators.cli); raised before the next step
@@ -274,7 +274,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
                 f.attrs["steps"] = scene.steps
             else:
-                max_s = max(scene.tableau(t).s for t in scene.tableaus)
+                max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
                 f = output.create(path, scene, version, n, _state_shapes(n, system.d, max_s), UNDER_RESOLVED)
             for tab, proj in scene.pairs:
                 g = f["runs"][output.pair_name(tab, proj)]
@@ -351,26 +351,28 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, d
     n, h = q0.shape[0], scene.h
     name = output.pair_name(tab_name, proj)
     start_step, saved = job
-    tab = scene.tableau(tab_name)
-    engine = Engine(system, tab, proj, h)
+    if proj == "map":                          # a user's step map (run.step_maps)
+        engine, s_tab = MapEngine(scene.step_map(tab_name), system, h, tab_name), 1
+    else:
+        engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
     blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
     lo, hi = blocks[rank]
     if saved is None:
         st = engine.state(q0[lo:hi])
     else:
         saved = comm.bcast(saved if rank == 0 else None, root=0)
-        st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, tab.s).items()}, h)
+        st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
     g = f["runs"][name] if rank == 0 else None
     wall0 = float(g["wall_clock"][0]) if rank == 0 else 0.0
     t_start = time.perf_counter()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
     if start_step == 0:
-        _output(comm, f, g, scene, diagnostics, st, 0, h, tab.s, after_output, name, clock)
+        _output(comm, f, g, scene, diagnostics, st, 0, h, s_tab, after_output, name, clock)
 
     def on_output(step):
         if rank == 0:
             g["wall_clock"][0] = wall0 + time.perf_counter() - t_start
-        _output(comm, f, g, scene, diagnostics, st, step, h, tab.s, after_output, name, clock)
+        _output(comm, f, g, scene, diagnostics, st, step, h, s_tab, after_output, name, clock)
 
     done = [start_step]
 

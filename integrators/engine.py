@@ -253,6 +253,51 @@ class Engine:
                        int(block), state._tuple(self.nz), (0,) * self.system.d)
 
 
+class MapEngine:
+    """A user's batched step map ``step(q, p, lam, h, system) -> (q, p, lam)`` (the audit's contract)
+    behind the Engine interface, so a scene's ``run.step_maps`` go through the same time loop, driver,
+    checkpoints and plots.  The map is called once per step on the live points; a point whose result
+    is not finite or leaves the domain breaks down there, and a map that raises stops every live
+    point at that step (one line on stderr).  Bits are the map's own business: a map that treats
+    each point on its own gives the same file for any rank count."""
+
+    def __init__(self, step, system, h, name="map"):
+        self.step, self.system, self.h, self.name = step, system, float(h), name
+        self.nz = 0
+
+    def state(self, q, p=None, lam=None):
+        q = np.asarray(q, dtype=np.float64)
+        p = self.system.theta(q) if p is None else p
+        lam = np.zeros_like(q) if lam is None else lam
+        return State(q, p, lam, self.h, 1)
+
+    def advance(self, state, first, nsteps, t0=0.0, block=BLOCK):
+        h, sy = self.h, self.system
+        for j in range(nsteps):
+            idx = np.flatnonzero(state.live)
+            if idx.size == 0:
+                return
+            q, p, lam = state.q[idx], state.p[idx], state.Lam[idx] / h
+            try:
+                with np.errstate(all="ignore"):
+                    q1, p1, l1 = (np.asarray(x, dtype=np.float64) for x in self.step(q, p, lam, h, sy))
+                if q1.shape != q.shape or p1.shape != q.shape or l1.shape != q.shape:
+                    raise ValueError(f"returned shapes {q1.shape}, {p1.shape}, {l1.shape} for {q.shape}")
+            except Exception as exc:      # the user's map failed: its points stop here, the run goes on
+                print(f"poincare: step map {self.name} raised {type(exc).__name__}: {exc} at step {first + j}; "
+                      "its points stop there", file=sys.stderr)
+                q1 = np.full_like(q, np.nan)
+                p1 = l1 = q1
+            good = np.all(np.isfinite(q1) & np.isfinite(p1) & np.isfinite(l1), axis=1)
+            good &= sy.in_domain(np.where(np.isfinite(q1), q1, 0.0))
+            ok, bad = idx[good], idx[~good]
+            state.q[ok], state.p[ok], state.Lam[ok] = q1[good], p1[good], h * l1[good]
+            state.steps[ok] += 1
+            state.have_history[ok] = True
+            state.live[bad] = False
+            state.breakdown_time[bad] = t0 + (first + j) * h
+
+
 def _lagrange_matrix(nodes, targets):
     """E with E_ij = ℓ_j(targets_i) for the Lagrange basis on ``nodes``: the next step's stage guess
     from the last step's stage values (nodes c_j − 1 extrapolated to c_i).  (Extrapolating from two

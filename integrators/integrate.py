@@ -55,8 +55,8 @@ def _as_points(q0, d, what):
     q0 = np.array(q0, dtype=float)
     if q0.ndim == 1:
         q0 = q0[None, :]
-    if q0.ndim != 2 or q0.shape[1] != d:
-        raise ValueError(f"{what} must have shape (d,) or (npoints, d) with d = {d}, got {np.shape(q0)}")
+    if q0.ndim < 2 or q0.shape[-1] != d:
+        raise ValueError(f"{what} must have shape (d,), (npoints, d) or (..., d) with d = {d}, got {np.shape(q0)}")
     return q0
 
 
@@ -68,7 +68,9 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     Parameters
     ----------
     system : System
-    q0 : (d,) or (npoints, d) initial positions, finite and inside the system's domain
+    q0 : (d,), (npoints, d) or (..., d) initial positions, finite and inside the system's domain; the
+        solution keeps the leading shape, so a surface (nσ, nτ, d) comes back as (nsave, nσ, nτ, d)
+        and ``invariants.along(solution, ...)`` gives its I₂ at every saved time
     tableau : Tableau or built-in name
     projection : 'none' | 'standard' | 'symmetric' | 'symplectic' | 'midpoint'
     h : time step (default: the system's paper value); may be negative
@@ -96,12 +98,14 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
         raise ValueError(f"save_every must be a positive integer, got {save_every}")
     steps, save_every = int(steps), int(save_every)
     q0 = _as_points(q0, system.d, "q0")
+    lead = q0.shape[:-1]                    # a loop (N,) or a surface (nσ, nτ): the set's shape travels along
+    q0 = q0.reshape(-1, system.d)
     bad = ~system.in_domain(q0)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise ValueError(f"initial point {k} = {q0[k].tolist()} is not finite or outside the domain of {system.name}")
-    p0 = system.theta(q0) if p0 is None else _as_points(p0, system.d, "p0")
-    lam0 = np.zeros_like(q0) if lam0 is None else _as_points(lam0, system.d, "lam0")
+    p0 = system.theta(q0) if p0 is None else _as_points(p0, system.d, "p0").reshape(q0.shape)
+    lam0 = np.zeros_like(q0) if lam0 is None else _as_points(lam0, system.d, "lam0").reshape(q0.shape)
     engine = Engine(system, tab, projection, h)
     n = q0.shape[0]
     nsave = steps // save_every + 1
@@ -119,6 +123,8 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     march(engine, state, 0, steps, save_every, on_output=record, t0=t0,
           progress=None if progress is None else (lambda step: progress(step, steps)),
           block=int(chunk) if chunk else BLOCK)
-    return Solution(t=out_t, q=out_q, p=out_p, lam=out_l, breakdown_time=state.breakdown_time.copy(),
-                    newton_iterations=state.iterations.copy(), steps_taken=state.steps.copy(),
+    full = (nsave,) + lead + (system.d,)
+    return Solution(t=out_t, q=out_q.reshape(full), p=out_p.reshape(full), lam=out_l.reshape(full),
+                    breakdown_time=state.breakdown_time.reshape(lead).copy(),
+                    newton_iterations=state.iterations.reshape(lead).copy(), steps_taken=state.steps.reshape(lead).copy(),
                     tableau=tab.name, projection=projection, h=h)

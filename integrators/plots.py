@@ -28,7 +28,8 @@ def _pairs(f):
     try:
         from .scene import parse_scene
         sc = parse_scene(f.attrs["scene"])
-        return list(sc.tableaus), list(sc.projections)
+        maps = [t for t, p in sc.pairs if p == "map"]
+        return list(sc.tableaus) + maps, list(sc.projections) + (["map"] if maps else [])
     except (KeyError, ValueError):
         pass
     names = list(f["runs"])

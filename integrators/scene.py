@@ -35,6 +35,8 @@ A scene file::
     [run]
     tableaus = ["GLRK1", "GLRK2", "SRK3"]  # built-in names or tableau TOML files (as `poincare audit` reads)
     projections = ["none", "standard", "symmetric", "symplectic", "midpoint"]
+    step_maps = ["mymaps.py:leapfrog"]    # optional: your batched step(q, p, lam, h, system) -> (q, p, lam)
+                                          # (the audit's contract), run as the pair "leapfrog-map"
     h = 10.0
     steps = 1000
     output_every = 10                     # steps between outputs
@@ -94,11 +96,22 @@ class Scene:
     base: str | None = None          # directory of the scene file: where a relative file.py:function is looked up
     system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
+    step_maps: tuple = ()            # run.step_maps specs, in order
 
     @property
     def pairs(self):
-        """(tableau, projection) pairs in run order."""
-        return [(t, p) for t in self.tableaus for p in self.projections]
+        """(tableau, projection) pairs in run order; a step map is (its function's name, 'map')."""
+        return [(t, p) for t in self.tableaus for p in self.projections] + \
+            [(step_map_label(m), "map") for m in self.step_maps]
+
+    def step_map(self, label):
+        """The callable of the step map whose pair label is ``label``."""
+        from .plugins import load_callable
+        spec = next(m for m in self.step_maps if step_map_label(m) == label)
+        try:
+            return load_callable(spec, "run.step_maps", self.base)
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
 
     def with_steps(self, steps: int) -> "Scene":
         """The same scene run for ``steps`` steps (``poincare run --steps``)."""
@@ -154,7 +167,7 @@ _SCHEMA = {
                "momentum": str, "domain": list, "function": str},
     "loop": {"shape": str, "points": int, "params": dict},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict},
-    "run": {"tableaus": list, "projections": list, "h": float, "steps": int, "output_every": int,
+    "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
             "forms": list, "diagnostics": list, "store_points": bool},
     "output": {"path": str},
 }
@@ -250,11 +263,21 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
                 raise SceneError(f"missing key 'surface.{k}'")
             if surface[k] < 2:
                 raise SceneError(f"surface.{k} must be at least 2, got {surface[k]}")
-    for key in ("tableaus", "projections", "h", "steps"):
+    maps = tuple(run.get("step_maps", ()))
+    for key in ("h", "steps") + (() if maps else ("tableaus", "projections")):
         if key not in run:
             raise SceneError(f"missing key 'run.{key}'")
-    tabs, tableau_files = _tableaus(run["tableaus"], base)
-    projs = _names(run["projections"], PROJECTIONS, "run.projections")
+    if maps:
+        from .plugins import is_spec
+        for m in maps:
+            if not is_spec(m):
+                raise SceneError(f"run.step_maps: '{m}' must be module:function or file.py:function")
+        if len({step_map_label(m) for m in maps}) != len(maps):
+            raise SceneError("'run.step_maps' lists two functions of the same name")
+    tabs, tableau_files = _tableaus(run["tableaus"], base) if "tableaus" in run else ((), {})
+    projs = _names(run["projections"], PROJECTIONS, "run.projections") if "projections" in run else ()
+    if bool(tabs) != bool(projs):
+        raise SceneError("run.tableaus and run.projections go together: give both or neither")
     h = float(run["h"])
     if not math.isfinite(h) or h <= 0:
         raise SceneError(f"run.h must be a finite positive number, got {run['h']!r}")
@@ -279,9 +302,16 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
-                  base=base, system_spec=spec, tableau_files=tableau_files)
+                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps)
     _check_points(scene, system)
+    for label in {step_map_label(m) for m in maps}:
+        scene.step_map(label)             # import now: a missing file or function is a one-line error
     return scene
+
+
+def step_map_label(spec):
+    """A step map's pair label: its function's name."""
+    return spec.rsplit(":", 1)[1]
 
 
 def _make_system(spec, params, base):
@@ -419,7 +449,7 @@ def _check_points(scene, system):
 # (a tableau file is compared by its label, the tableau's name: where the file lies may differ between
 # a run and its resume, which finds it next to the output or in the current directory)
 _KEYS = {"system_name": "system.name", "system_params": "system.params", "system_spec": "system",
-         "loop": "loop", "surface": "surface",
+         "loop": "loop", "surface": "surface", "step_maps": "run.step_maps",
          "tableaus": "run.tableaus", "projections": "run.projections", "h": "run.h", "steps": "run.steps",
          "output_every": "run.output_every", "forms": "run.forms", "diagnostics": "run.diagnostics",
          "store_points": "run.store_points"}

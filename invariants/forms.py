@@ -65,8 +65,25 @@ def _need(x, name, form):
     return x
 
 
+def _user_values(form, q, shape, what):
+    """A user form's values at the samples, checked: finite, of the expected shape."""
+    try:
+        A = np.asarray(form(q), dtype=float)
+    except Exception as exc:
+        raise ValueError(f"the {what} {getattr(form, '__name__', form)!r} failed: {type(exc).__name__}: {exc}") \
+            from None
+    if A.shape != shape:
+        raise ValueError(f"the {what} must return shape {shape} for points {q.shape}, got {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError(f"the {what} returned non-finite values")
+    return A
+
+
 def one_form_coefficients(q, form, system=None, p=None, lam=None, h=None):
-    """Coefficients (A_q, A_λ) of the one-form at the samples; A_λ is None unless corrected."""
+    """Coefficients (A_q, A_λ) of the one-form at the samples; A_λ is None unless corrected.
+    ``form`` may be a callable ϑ(q): (..., d) -> (..., d), a one-form of the user's."""
+    if callable(form):
+        return _user_values(form, q, q.shape, "one-form"), None
     if form == "canonical":
         return _check(_need(p, "p", form), q.ndim, "p"), None
     if form not in FORMS:
@@ -85,7 +102,8 @@ def one_form_coefficients(q, form, system=None, p=None, lam=None, h=None):
 def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None) -> InvariantValue:
     """I₁ = ∮ A(q) dq/dτ dτ over a loop q (N, d) sampled at τ_j = j/N (FFT derivative, trapezoid).
 
-    form : 'noncanonical' (needs system), 'canonical' (needs p), 'corrected' (needs system, lam, h)
+    form : 'noncanonical' (needs system), 'canonical' (needs p), 'corrected' (needs system, lam, h),
+        or a callable ϑ(q) -> (N, d): the coefficients of a one-form of your own
     """
     q = _check(q, 2, "loop q")
     A, Al = one_form_coefficients(q, form, system, p, lam, h)
@@ -127,12 +145,16 @@ def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=No
     """I₂ = ∫∫ Ω_ab x_σ^a x_τ^b dσ dτ over a surface q (n_σ, n_τ, d) at Chebyshev points.
 
     form : 'noncanonical' (Ω̄(q), needs system), 'canonical' (∫∫ p_σ·q_τ − p_τ·q_σ, needs p),
-    'corrected' (dϑ_λ on (q, λ), needs system, lam, h).
+    'corrected' (dϑ_λ on (q, λ), needs system, lam, h), or a callable Ω(q) -> (n_σ, n_τ, d, d):
+    the matrix of a two-form ½Ω_ab dq^a ∧ dq^b of your own.
     """
     q = _check(q, 3, "surface q")
     qs, qt = spectral.chebyshev_derivative(q, 0), spectral.chebyshev_derivative(q, 1)
     fields = [q]
-    if form == "canonical":
+    if callable(form):
+        Om = _user_values(form, q, q.shape + (q.shape[-1],), "two-form")
+        integrand = np.einsum("...i,...ij,...j->...", qs, Om, qt)
+    elif form == "canonical":
         p = _check(_need(p, "p", form), 3, "p")
         ps, pt = spectral.chebyshev_derivative(p, 0), spectral.chebyshev_derivative(p, 1)
         integrand = np.sum(ps * qt - pt * qs, axis=-1)
@@ -152,3 +174,49 @@ def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=No
         raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
     res = max(spectral.surface_tail(f) for f in fields)
     return InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)
+
+
+@dataclasses.dataclass(frozen=True)
+class InvariantSeries:
+    """An invariant along a solution: ``t``, ``value`` and ``resolution`` (nsave,), and
+    ``relative_error`` = |I(t) − I(0)| / |I(0)|.  NaN where a point of the set had broken down."""
+
+    t: np.ndarray
+    value: np.ndarray
+    resolution: np.ndarray
+
+    @property
+    def relative_error(self):
+        return np.abs(self.value - self.value[0]) / abs(self.value[0])
+
+    @property
+    def under_resolved(self):
+        return ~(self.resolution <= UNDER_RESOLVED)
+
+
+def along(solution, form="noncanonical", system=None) -> InvariantSeries:
+    """The invariant of a sample set at every saved time of an ``integrators.integrate`` solution.
+
+    The set's shape travels with the points: integrate a loop (N, d) and get I₁, a surface
+    (n_σ, n_τ, d) and get I₂ (``integrate`` keeps the leading shape of q0).  ``form`` as for
+    :func:`first_invariant` / :func:`second_invariant`, a user callable included; p, λ and h come
+    from the solution.
+    """
+    q = np.asarray(solution.q)
+    if q.ndim == 3:
+        fn = first_invariant
+    elif q.ndim == 4:
+        fn = second_invariant
+    else:
+        raise ValueError(f"along: the solution's q has shape {q.shape}; integrate a loop (N, d) or a surface "
+                         "(n_sigma, n_tau, d)")
+    vals, res = np.full(q.shape[0], np.nan), np.full(q.shape[0], np.nan)
+    for k in range(q.shape[0]):
+        if not np.all(np.isfinite(q[k])):
+            continue
+        broken = np.isfinite(solution.breakdown_time) & (solution.breakdown_time <= solution.t[k])
+        if np.any(broken):
+            continue
+        v = fn(q[k], form, system=system, p=solution.p[k], lam=solution.lam[k], h=solution.h)
+        vals[k], res[k] = v.value, v.resolution
+    return InvariantSeries(np.asarray(solution.t), vals, res)

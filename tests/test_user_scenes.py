@@ -176,3 +176,57 @@ def test_read_run_refuses_a_file_that_is_not_a_run(tmp_path):
         f["a"] = 1
     with pytest.raises(DamagedFile, match="not a poincare run file"):
         read_run(tmp_path / "y.h5")
+
+
+MAPS = '''import numpy as np
+
+def rk4(q, p, lam, h, system):
+    """Classical RK4 on q' = v(q): a batched step map, not symplectic."""
+    f = system.vector_field
+    k1 = f(q); k2 = f(q + h / 2 * k1); k3 = f(q + h / 2 * k2); k4 = f(q + h * k3)
+    q1 = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return q1, system.theta(q1), np.zeros_like(q1)
+
+def broken(q, p, lam, h, system):
+    raise RuntimeError("no")
+'''
+
+
+@pytest.mark.mpi
+def test_a_step_map_runs_as_a_pair_of_the_scene(tmp_path):
+    """run.step_maps: the user's map goes through the same driver, MPI, HDF5 and plots; RK4's invariant
+    error grows (it is not symplectic) while GLRK2-symmetric stays at round-off."""
+    (tmp_path / "mymaps.py").write_text(MAPS)
+    scene = _write(tmp_path, SCENE.replace('projections = ["symmetric", "none"]',
+                                           'projections = ["symmetric"]\nstep_maps = ["mymaps.py:rk4"]'))
+    for n, out in ((None, "one.h5"), (2, "two.h5")):
+        r = _poincare("run", str(scene), "-o", str(tmp_path / out), "-q", n=n, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    a, b = read_run(tmp_path / "one.h5"), read_run(tmp_path / "two.h5")
+    assert sorted(a.pairs) == ["GLRK2-symmetric", "MyGL2-symmetric", "rk4-map"]
+    for k in a.pairs:
+        assert a[k].status == "ok" and np.array_equal(a[k].I2["canonical"], b[k].I2["canonical"])
+    e_rk4 = a["rk4-map"].relative_error("I1", "canonical")
+    assert e_rk4[-1] > 1e-8 and e_rk4[-1] > e_rk4[2]
+    assert a["GLRK2-symmetric"].relative_error("I1", "canonical").max() < 1e-12
+    r = _poincare("plot", str(tmp_path / "two.h5"), "-o", str(tmp_path / "figs"))
+    assert r.returncode == 0, r.stderr
+
+
+def test_a_step_map_that_raises_stops_its_points_not_the_run(tmp_path):
+    (tmp_path / "mymaps.py").write_text(MAPS)
+    scene = _write(tmp_path, SCENE.replace('projections = ["symmetric", "none"]',
+                                           'projections = ["symmetric"]\nstep_maps = ["mymaps.py:broken"]'))
+    r = _poincare("run", str(scene), "-o", str(tmp_path / "x.h5"), "-q", cwd=tmp_path)
+    assert r.returncode == 1, r.stderr                 # a pair failed: not ok
+    assert r.stderr.count("step map broken raised RuntimeError: no at step 1") == 1
+    run = read_run(tmp_path / "x.h5")
+    assert run["broken-map"].status == "failed" and np.all(run["broken-map"].breakdown_time == 0.1)
+    assert run["GLRK2-symmetric"].status == "ok"
+
+
+def test_a_missing_step_map_is_a_one_line_error(tmp_path):
+    scene = _write(tmp_path, SCENE.replace('projections = ["symmetric", "none"]',
+                                           'projections = ["symmetric"]\nstep_maps = ["nothere.py:rk4"]'))
+    with pytest.raises(SceneError, match=r"run\.step_maps.*nothere\.py"):
+        parse_scene(scene.read_text(), origin=str(scene))
