@@ -350,11 +350,40 @@ def _guiding_centre_symmetric():
                   defaults={"q0": [0.5, 0.0, 0.0, 0.5], "h": 10.0}, flow=_guiding_centre_symmetric_flow)
 
 
+def _massless_charged_particle():
+    """A massless charged particle in the plane (GeometricProblems.jl, MasslessChargedParticle):
+    ϑ = A(x) = A₀/2 (1 + x₁² + x₂²)(−x₂, x₁), so B = ∇×A = A₀(1 + 2x₁² + 2x₂²), and H = φ(x) =
+    E₀(cos x₁ + sin x₂).  No continuous symmetry: the energy is the conserved quantity."""
+    x1, x2 = sympy.symbols("x1 x2", real=True)
+    A0, E0 = sympy.symbols("A0 E0")
+    S = 1 + x1**2 + x2**2
+    return System("massless_charged_particle", [x1, x2], [-A0 * x2 * S / 2, A0 * x1 * S / 2],
+                  E0 * (sympy.cos(x1) + sympy.sin(x2)), {A0: 1.0, E0: 1.0},
+                  defaults={"q0": [1.0, 1.0], "h": 0.2})
+
+
+def _lotka_volterra_4d():
+    """Lotka–Volterra in 4-D as a degenerate Lagrangian system (GeometricProblems.jl, LotkaVolterra4d):
+    ϑ = ((log q₂ + log q₄)/q₁, log q₃/q₂, (log q₁ + log q₄)/q₃, log q₂/q₄),
+    H = Σᵢ aᵢqᵢ + bᵢ log qᵢ, every qᵢ > 0."""
+    q = sympy.symbols("q1 q2 q3 q4", positive=True)
+    a = sympy.symbols("a1 a2 a3 a4")
+    b = sympy.symbols("b1 b2 b3 b4")
+    lg = [sympy.log(x) for x in q]
+    theta = [(lg[1] + lg[3]) / q[0], lg[2] / q[1], (lg[0] + lg[3]) / q[2], lg[1] / q[3]]
+    H = sum(ai * qi + bi * li for ai, qi, bi, li in zip(a, q, b, lg))
+    params = dict(zip(a, (1.0, 1.0, 1.0, 1.0))) | dict(zip(b, (-1.0, -2.0, -1.0, -1.0)))
+    return System("lotka_volterra_4d", list(q), theta, H, params, domain=list(q),
+                  defaults={"q0": [2.0, 1.0, 1.0, 1.0], "h": 0.1})
+
+
 _SYSTEMS = {
     "lotka_volterra_2d": _lotka_volterra_2d,
     "point_vortices": _point_vortices,
     "guiding_centre_tokamak": _guiding_centre_tokamak,
     "guiding_centre_symmetric": _guiding_centre_symmetric,
+    "massless_charged_particle": _massless_charged_particle,
+    "lotka_volterra_4d": _lotka_volterra_4d,
 }
 SYSTEM_NAMES = tuple(_SYSTEMS)
 
@@ -364,7 +393,9 @@ def _builtin(name):
     return _SYSTEMS[name]()
 
 
-_ALIASES = {"gamma": ("gamma1", "gamma2"), "a": ("a1", "a2"), "b": ("b1", "b2")}
+_ALIASES = {"point_vortices": {"gamma": ("gamma1", "gamma2")},
+            "lotka_volterra_2d": {"a": ("a1", "a2"), "b": ("b1", "b2")},
+            "lotka_volterra_4d": {"a": ("a1", "a2", "a3", "a4"), "b": ("b1", "b2", "b3", "b4")}}
 
 
 def system(name: str, **params) -> System:
@@ -378,11 +409,12 @@ def system(name: str, **params) -> System:
     if not params:
         return base
     flat = {}
+    aliases = _ALIASES.get(name, {})
     for key, val in params.items():
-        if key in _ALIASES and np.ndim(val) == 1:
-            if len(val) != len(_ALIASES[key]):
-                raise ValueError(f"system {name}: parameter '{key}' needs {len(_ALIASES[key])} values")
-            flat.update(zip(_ALIASES[key], val))
+        if key in aliases and np.ndim(val) == 1:
+            if len(val) != len(aliases[key]):
+                raise ValueError(f"system {name}: parameter '{key}' needs {len(aliases[key])} values")
+            flat.update(zip(aliases[key], val))
         else:
             flat[key] = val
     return base.with_params(**flat)
