@@ -122,6 +122,9 @@ def cmd_run(args) -> int:
               f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
               f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
               flush=True)
+        from .engine import kernel_cached
+        if not kernel_cached():
+            print("compiling the step engine (once per machine, about 40 s on 2 cores) ...", flush=True)
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,

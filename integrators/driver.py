@@ -275,7 +275,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 f.attrs["steps"] = scene.steps
             else:
                 max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
-                f = output.create(path, scene, version, n, _state_shapes(n, system.d, max_s), UNDER_RESOLVED)
+                f = output.create(path, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
             for tab, proj in scene.pairs:
                 g = f["runs"][output.pair_name(tab, proj)]
                 step, state = output.read_checkpoint(g)
@@ -392,13 +392,6 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, d
     output.set_status(g, status, unresolved)
     f.flush()
     return _balance(stats, clock)
-
-
-def _state_shapes(n, d, s):
-    return {"q": ((n, d), "f8"), "p": ((n, d), "f8"), "Lam": ((n, d), "f8"), "q_comp": ((n, d), "f8"),
-            "p_comp": ((n, d), "f8"), "Y": ((n, s, d), "f8"), "mu": ((n, d), "f8"),
-            "have_history": ((n,), "?"), "live": ((n,), "?"), "breakdown_time": ((n,), "f8"),
-            "iterations": ((n,), "i8"), "steps": ((n,), "i8")}
 
 
 def _pad(state, s_max):

@@ -56,6 +56,15 @@ def set_threads(n: int | None):
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS if n is None else max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
 
 
+def kernel_cached() -> bool:
+    """Whether numba's on-disk cache already holds a compiled step kernel (a first run compiles it)."""
+    from . import kernel
+    try:
+        return os.path.exists(kernel.advance._cache._cache_file._index_path)
+    except AttributeError:          # another numba's internals: say nothing rather than guess
+        return True
+
+
 def get_threads() -> int:
     import numba
     return numba.get_num_threads()
@@ -193,6 +202,13 @@ class State:
         for name in CHECKPOINT_FIELDS:
             setattr(st, name, np.ascontiguousarray(fields[name]).copy())
         return st
+
+    @classmethod
+    def schema(cls, n, d, s) -> dict:
+        """{field: (shape, dtype)} of the checkpoint of n points (what the HDF5 file preallocates),
+        read off a one-point state so the fields and their types are defined only here."""
+        one = cls(np.zeros((1, d)), np.zeros((1, d)), np.zeros((1, d)), 1.0, s)
+        return {name: ((n,) + getattr(one, name).shape[1:], getattr(one, name).dtype) for name in CHECKPOINT_FIELDS}
 
     def checkpoint(self) -> dict:
         return {name: getattr(self, name) for name in CHECKPOINT_FIELDS}
