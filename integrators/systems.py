@@ -377,6 +377,56 @@ def _lotka_volterra_4d():
                   defaults={"q0": [2.0, 1.0, 1.0, 1.0], "h": 0.1})
 
 
+def _guiding_centre_solovev():
+    """Guiding centre in a Solov'ev equilibrium (an exact Grad–Shafranov solution with constant
+    p′(ψ) and F = B₀R₀), q = (R, Z, φ, u), the same Lagrangian as app:guiding_centre_dynamics:
+    ϑ = A + u b, H = u²/2 + μ|B|, with covariant A = (B₀R₀Z/(2R), −B₀R₀ log(R/R₀)/2, −ψ) and
+
+        ψ(R, Z) = B₀/(2q₀R₀²) ((R² − R₀²)²/4 + R²Z²/κ²),
+
+    so Δ*ψ = B₀(1 + 1/κ²)R²/(q₀R₀²) and near the axis ψ ≈ B₀/(2q₀) ((R − R₀)² + Z²/κ²): the tokamak
+    field of guiding_centre_tokamak with flux surfaces elongated by κ and Shafranov-shifted, as in the
+    Solov'ev equilibria of ChargedParticleDynamics.jl / ElectromagneticFields.jl (McCarthy 1999,
+    Cerfon & Freidberg 2010).  B^i = ε^{ijk}∂_jA_k/R in the (R, Z, φ) order used by the tokamak.
+    Conserved: the energy and the toroidal momentum ϑ_φ."""
+    R, Z, phi, u = sympy.symbols("R Z phi u", real=True)
+    R0, B0, q0, kappa, mu = sympy.symbols("R0 B0 q0 kappa mu")
+    psi = B0 / (2 * q0 * R0**2) * ((R**2 - R0**2) ** 2 / 4 + R**2 * Z**2 / kappa**2)
+    A = [B0 * R0 * Z / (2 * R), -B0 * R0 * sympy.log(R / R0) / 2, -psi]
+    B_cov = [sympy.diff(A[2], Z) / R, -sympy.diff(A[2], R) / R,
+             R * (sympy.diff(A[1], R) - sympy.diff(A[0], Z))]          # B_R = B^R, B_Z = B^Z, B_φ = R² B^φ
+    absB = sympy.sqrt(B_cov[0] ** 2 + B_cov[1] ** 2 + B_cov[2] ** 2 / R**2)
+    theta = [A[i] + u * B_cov[i] / absB for i in range(3)] + [0]
+    H = u**2 / 2 + mu * absB
+    return System("guiding_centre_solovev", [R, Z, phi, u], theta, H,
+                  {R0: 2.0, B0: 5.0, q0: 2.0, kappa: 1.6, mu: 0.01}, symmetry=[0, 0, 1, 0],
+                  momentum_name="toroidal momentum", domain=[R],
+                  defaults={"q0": [2.3, 0.0, 0.0, -0.3], "h": 2.5})
+
+
+def _charged_particle_tokamak():
+    """The full orbit of a charged particle (charge/mass 1) in the tokamak field of
+    app:guiding_centre_dynamics, written as a degenerate Lagrangian in 6-D phase space q = (x, v):
+
+        L = (A(x) + v)·ẋ − |v|²/2,   ϑ = (A(x) + v, 0, 0, 0),   H = |v|²/2,
+
+    whose Euler–Lagrange equations are ẋ = v, v̇ = v × B (the Lorentz force), B = ∇×A.  A is the
+    tokamak's vector potential in Cartesian components (A_R, A_Z and A_φ of guiding_centre_tokamak
+    rotated by φ = atan2(y, x)).  Rotation about z (x and v together) is a symmetry, so the toroidal
+    canonical momentum ϑ·V, V = (−y, x, 0, −v_y, v_x, 0), is conserved with the energy."""
+    x, y, z, vx, vy, vz = sympy.symbols("x y z v_x v_y v_z", real=True)
+    R0, B0, q0 = sympy.symbols("R0 B0 q0")
+    R = sympy.sqrt(x**2 + y**2)
+    r2 = (R - R0) ** 2 + z**2
+    A_R, A_Z, A_phi = B0 * R0 * z / (2 * R), -sympy.log(R / R0) * B0 * R0 / 2, -B0 * r2 / (2 * q0 * R)
+    A = [(A_R * x - A_phi * y) / R, (A_R * y + A_phi * x) / R, A_Z]
+    theta = [A[0] + vx, A[1] + vy, A[2] + vz, 0, 0, 0]
+    return System("charged_particle_tokamak", [x, y, z, vx, vy, vz], theta, (vx**2 + vy**2 + vz**2) / 2,
+                  {R0: 2.0, B0: 5.0, q0: 2.0}, symmetry=[-y, x, 0, -vy, vx, 0],
+                  momentum_name="toroidal momentum", domain=[x**2 + y**2],
+                  defaults={"q0": [2.5, 0.0, 0.0, 0.2, 0.5, 0.0], "h": 0.05})
+
+
 _SYSTEMS = {
     "lotka_volterra_2d": _lotka_volterra_2d,
     "point_vortices": _point_vortices,
@@ -384,6 +434,8 @@ _SYSTEMS = {
     "guiding_centre_symmetric": _guiding_centre_symmetric,
     "massless_charged_particle": _massless_charged_particle,
     "lotka_volterra_4d": _lotka_volterra_4d,
+    "guiding_centre_solovev": _guiding_centre_solovev,
+    "charged_particle_tokamak": _charged_particle_tokamak,
 }
 SYSTEM_NAMES = tuple(_SYSTEMS)
 
