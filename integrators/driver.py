@@ -211,6 +211,10 @@ def _resume_plan(path, scene):
     if steps is not None:
         old = dataclasses.replace(old, steps=steps)
     diff = scene_differences(old, scene)
+    for label, digest in output.read_tableau_digests(path).items():
+        if label in scene.tableau_files and scene.tableau(label).digest != digest:
+            raise ValueError(f"cannot resume '{path}': tableau file '{scene.tableau_files[label]}' ({label}) "
+                             "has other coefficients than the run was started with")
     if diff == ["run.steps"] and scene.steps > old.steps:
         return old.steps                      # extend a run to more steps
     if diff == ["run.steps"]:

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import json
 import re
 
 import h5py
@@ -133,6 +134,8 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
     f.attrs["system"] = scene.system_name
     f.attrs["resolution_threshold"] = threshold
     f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    if scene.tableau_files:                 # a resume must find the same coefficients, not only the name
+        f.attrs["tableau_digests"] = json.dumps({t: scene.tableau(t).digest for t in scene.tableau_files})
     runs = f.create_group("runs")
     for tab, proj in scene.pairs:
         g = runs.create_group(pair_name(tab, proj))
@@ -218,6 +221,12 @@ def read_scene_text(path):
             return str(f.attrs["scene"]), (None if steps is None else int(steps))
     except (OSError, KeyError) as exc:
         raise DamagedFile(f"cannot read '{path}': damaged or not an HDF5 run file ({plain_error(exc)})") from None
+
+
+def read_tableau_digests(path) -> dict:
+    """{label: Tableau.digest} of the tableau files a run was started with ({} for none / older files)."""
+    with h5py.File(path, "r") as f:
+        return json.loads(f.attrs.get("tableau_digests", "{}"))
 
 
 def open_for_resume(path):

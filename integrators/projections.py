@@ -98,6 +98,6 @@ def admission(tableau, projection):
     if projection not in PROJECTIONS:
         return f"unknown projection '{projection}'; choose one of {', '.join(PROJECTIONS)}"
     if RECORDS[projection].sign == "R_inf" and abs(tableau.R_inf) != 1.0:
-        return (f"projection '{projection}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = {tableau.R_inf:g}; "
+        return (f"projection '{projection}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = {tableau.R_inf:.17g}; "
                 "use 'none' or 'standard'")
     return None

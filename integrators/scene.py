@@ -41,7 +41,8 @@ A scene file::
     steps = 1000
     output_every = 10                     # steps between outputs
     forms = ["canonical", "noncanonical", "corrected"]
-    diagnostics = ["energy", "momentum", "constraint"]
+    diagnostics = ["energy", "momentum", "constraint"]   # default: all three ("momentum" only where the
+                                          # system has one: a symmetry or a momentum expression)
     store_points = false                  # also store every sample point at every output
 
     [output]
@@ -288,7 +289,8 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     if every <= 0 or every > steps:
         raise SceneError(f"run.output_every must be between 1 and run.steps = {steps}, got {every}")
     forms = _names(run.get("forms", ["canonical", "noncanonical"]), FORMS, "run.forms")
-    diags = _names(run.get("diagnostics", list(DIAGNOSTICS)), DIAGNOSTICS, "run.diagnostics")
+    default_diags = [x for x in DIAGNOSTICS if x != "momentum" or system.has_momentum]
+    diags = _names(run.get("diagnostics", default_diags), DIAGNOSTICS, "run.diagnostics")
     if "momentum" in diags and not system.has_momentum:
         raise SceneError(f"run.diagnostics: system '{system.name}' has no Noether momentum")
     for t in tabs:
@@ -446,8 +448,9 @@ def _check_points(scene, system):
                              f"{cond[k]:.1e}); check system.theta")
 
 
-# (a tableau file is compared by its label, the tableau's name: where the file lies may differ between
-# a run and its resume, which finds it next to the output or in the current directory)
+# (a tableau file is compared here by its label, the tableau's name: where the file lies may differ
+# between a run and its resume, which finds it next to the output or in the current directory; its
+# coefficients are compared by the driver against the digests stored in the run file)
 _KEYS = {"system_name": "system.name", "system_params": "system.params", "system_spec": "system",
          "loop": "loop", "surface": "surface", "step_maps": "run.step_maps",
          "tableaus": "run.tableaus", "projections": "run.projections", "h": "run.h", "steps": "run.steps",

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import tomllib
 from pathlib import Path
 
@@ -65,6 +66,16 @@ class Tableau:
         s = self.s
         return float(max(abs(b[i] * ab[i, j] + b[j] * a[j, i] - b[i] * b[j])
                          for i in range(s) for j in range(s)))
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 of every coefficient the step uses (a, ā, b with their corrections, c, d), bit for
+        bit: two tableaus with the same digest step identically whatever their files look like."""
+        h = hashlib.sha256()
+        for x in (self.a, self.a_lo, self.abar, self.abar_lo, self.b, self.b_lo, self.c,
+                  np.zeros(0) if self.d is None else self.d):
+            h.update(np.ascontiguousarray(x, dtype="<f8").tobytes() + b"|")
+        return h.hexdigest()
 
     def __repr__(self) -> str:
         return f"Tableau({self.name}, s={self.s}, order={self.order}, R(∞)={self.R_inf:g})"

@@ -87,7 +87,9 @@ diagnostics = ["energy"]
 
 def test_every_builtin_scene_validates():
     names = set(builtin_scenes())
-    assert {"default", "paper_poincare", "lotka_volterra", "point_vortices", "guiding_centre_tokamak"} <= names
+    assert {"default", "paper_poincare", "lotka_volterra", "point_vortices", "guiding_centre_tokamak",
+            "massless_charged_particle", "lotka_volterra_4d", "guiding_centre_solovev",
+            "charged_particle_tokamak"} <= names
     for name in names:
         load_scene(name)
 

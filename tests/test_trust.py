@@ -217,7 +217,8 @@ def test_a_resolved_scene_is_ok_and_exits_0(tmp_path):
 
 
 @pytest.mark.parametrize("name", ["default", "point_vortices", "lotka_volterra", "guiding_centre_tokamak",
-                                  "paper_poincare"])
+                                  "paper_poincare", "massless_charged_particle", "lotka_volterra_4d",
+                                  "guiding_centre_solovev", "charged_particle_tokamak"])
 def test_builtin_scenes_start_resolved(name):
     """Every shipped scene's sets resolve their invariants at t = 0 (the whole run: docs/benchmarks.md)."""
     from invariants import UNDER_RESOLVED
@@ -230,6 +231,24 @@ def test_builtin_scenes_start_resolved(name):
     if sc.surface is not None:
         q = sc.surface_points()
         assert max(surface_tail(q), surface_tail(sy.theta(q))) < UNDER_RESOLVED / 10
+
+
+@pytest.mark.parametrize("name", ["massless_charged_particle", "lotka_volterra_4d", "guiding_centre_solovev",
+                                  "charged_particle_tokamak"])
+def test_the_new_systems_scenes_run_ok_through_the_driver(name, tmp_path):
+    """The first 40 steps of each new system's scene (2-, 4- and 6-dimensional) through the driver and
+    HDF5: every pair ok, and the pairs docs/scenes.md names as keeping a form keep it to round-off."""
+    import dataclasses
+    sc = load_scene(name)
+    sc = dataclasses.replace(sc, steps=40, output_every=20)
+    summaries = driver.run(sc, tmp_path / "x.h5", progress=False)
+    assert {s.status for s in summaries} == {"ok"}
+    run = integrators.read_run(tmp_path / "x.h5")
+    for pair in run.pairs:
+        kept = ("canonical" if pair.endswith("-none") else "corrected" if pair.endswith("-symplectic") else None)
+        if kept:
+            for inv in ("I1", "I2"):
+                assert np.max(np.abs(run[pair].relative_error(inv, kept))) < 1e-11, (pair, inv)
 
 
 def test_each_pairs_status_is_written_when_it_finishes(tmp_path):

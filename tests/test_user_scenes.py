@@ -168,6 +168,32 @@ def test_a_user_scene_resumes_to_the_same_bits(tmp_path):
                 assert np.array_equal(a["runs"][pair][key][()], b["runs"][pair][key][()]), (pair, key)
 
 
+def test_a_changed_tableau_file_is_not_resumed(tmp_path, capsys):
+    """The run file keeps the digest of each tableau file's coefficients: a resume after the file was
+    edited (same name, one coefficient's last bits changed) is a one-line error, not a silent mix of
+    two methods; the unchanged file resumes."""
+    scene = _write(tmp_path, SCENE.replace('projections = ["symmetric", "none"]', 'projections = ["none"]'))
+    out = tmp_path / "r.h5"
+    assert cli_main(["run", str(scene), "-o", str(out), "-q", "--steps", "20"]) == 0
+    with h5py.File(out) as f:
+        assert "MyGL2" in f.attrs["tableau_digests"]
+    (tmp_path / "my_gl2.toml").write_text(TABLEAU.replace('b = ["1/2", "1/2"]', 'b = ["0.5000000000000001", "1/2"]'))
+    capsys.readouterr()
+    assert cli_main(["run", str(scene), "-o", str(out), "-q", "--resume"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "my_gl2.toml" in err[0] and "other coefficients" in err[0], err
+    (tmp_path / "my_gl2.toml").write_text("# reformatted\n" + TABLEAU)
+    assert cli_main(["run", str(scene), "-o", str(out), "-q", "--resume"]) == 0
+
+
+def test_an_almost_symmetric_tableau_is_refused_with_its_digits(tmp_path):
+    """A b perturbed in its last bit moves R(∞) to 0.9999999999999997: the σ = R(∞) projections refuse it, and
+    the message prints R(∞) to 17 digits (it read 'needs |R(∞)| = 1 but MyGL2 has R(∞) = 1')."""
+    (tmp_path / "my_gl2.toml").write_text(TABLEAU.replace('b = ["1/2", "1/2"]', 'b = ["0.5000000000000001", "1/2"]'))
+    with pytest.raises(SceneError, match=r"MyGL2 has R\(∞\) = 0\.99999999999999\d+; use"):
+        parse_scene(SCENE, origin=str(tmp_path / "user.toml"))
+
+
 def test_read_run_refuses_a_file_that_is_not_a_run(tmp_path):
     (tmp_path / "x.h5").write_bytes(b"not hdf5 at all")
     with pytest.raises(DamagedFile, match="x.h5"):
