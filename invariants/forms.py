@@ -100,23 +100,23 @@ def one_form_coefficients(q, form, system=None, p=None, lam=None, h=None):
 
 
 def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None) -> InvariantValue:
-    """I₁ = ∮ A(q) dq/dτ dτ over a loop q (N, d) sampled at τ_j = j/N (FFT derivative, trapezoid).
+    """I₁ = ∮ A(q) dq/dτ dτ over a loop q (N, d) sampled at τ_j = j/N: the trapezoidal rule of A·(spectral
+    dq/dτ), evaluated in Fourier space by Parseval (spectral.loop_pairing).
 
     form : 'noncanonical' (needs system), 'canonical' (needs p), 'corrected' (needs system, lam, h),
         or a callable ϑ(q) -> (N, d): the coefficients of a one-form of your own
     """
     q = _check(q, 2, "loop q")
     A, Al = one_form_coefficients(q, form, system, p, lam, h)
-    dq = spectral.loop_derivative(q)
-    integrand = np.sum(A * dq, axis=1)
+    value = spectral.loop_pairing(A, q)                      # in Fourier space (Parseval)
     fields = [q]
     if Al is not None:
-        integrand = integrand + np.sum(Al * spectral.loop_derivative(lam), axis=1)
+        value += spectral.loop_pairing(Al, lam)
         fields = [np.concatenate([q, h * lam], axis=-1)]     # hλ has the units of q (dq − h dλ)
     if form == "canonical":
         fields.append(p)
     res = max(spectral.loop_tail(f) for f in fields)
-    return InvariantValue(float(spectral.loop_integral(integrand)), res, res > UNDER_RESOLVED)
+    return InvariantValue(float(value), res, res > UNDER_RESOLVED)
 
 
 def corrected_omega(system, q, lam, h, paper_sign=False):

@@ -54,6 +54,27 @@ def loop_derivative(f):
     return inv(fh).copy()
 
 
+def loop_pairing(a, b):
+    """∮ a·db/dτ dτ over [0, 1) for samples a, b (N, d) at τ_j = j/N, summed over the last axis.
+
+    Computed in Fourier space (discrete Parseval): with â_k, b̂_k the rfft coefficients / N,
+
+        ∮ a·b′ dτ = Σ_k conj(â_k)·(2πik) b̂_k = −4π Σ_{k=1}^{K} k Im(conj(â_k)·b̂_k),
+
+    the Nyquist mode dropped as in :func:`loop_derivative`.  Mathematically the trapezoidal rule of
+    a·(spectral b′); numerically it skips the inverse FFT of the derivative, whose round-off the
+    high modes k ~ N/2 amplify: on PoincareInvariants.jl's 4-D Hénon map (two maps, I₁ = 2π,
+    N = 1000) the error over 20 phases of the sampling is 4.7e-13 against 2.8e-12 in the median and
+    1.6e-12 against 9.1e-12 in the worst; neither grows with N from 250 to 16,000 (docs/invariants.md)."""
+    N = a.shape[0]
+    ah, bh = fourier_coefficients(a), fourier_coefficients(b)
+    w = 2.0 * np.arange(ah.shape[0], dtype=float)           # k, twice for the ±k pair
+    if N % 2 == 0:
+        w[-1] = 0.0
+    prod = (np.conj(ah) * bh).imag
+    return -2.0 * np.pi * float(np.sum(w.reshape((-1,) + (1,) * (a.ndim - 1)) * prod))
+
+
 def loop_integral(f):
     """∮ f dτ over [0, 1) by the trapezoidal rule: mean over axis 0."""
     return np.sum(f, axis=0) / f.shape[0]

@@ -50,7 +50,7 @@ def main():
              "to t = 500 (differential rotation by 2μt/(1 + r²) about z, z += u t), which leaves both values "
              "unchanged. Columns: relative error |I − I_exact|/|I_exact| and the resolution monitor "
              "(relative size of the top 1/8 of the modes; flagged above 1e-10).", "",
-             "## I₁ on the loop (FFT, trapezoidal rule)", "",
+             "## I₁ on the loop (Fourier coefficients, Parseval)", "",
              "| N | error t=0 | monitor t=0 | error advected | monitor advected |", "|---|---|---|---|---|"]
     for N in (8, 16, 32, 64, 128, 256, 512, 1000, 2000):
         q = invariants.loop("guiding_centre", N)
@@ -66,6 +66,23 @@ def main():
         b = invariants.second_invariant(flow(S, 500.0), "noncanonical", system=GC)
         lines.append(f"| {n} | {abs(a.value - I2x) / abs(I2x):.1e} | {a.resolution:.1e}{' (flagged)' if a.under_resolved else ''} | "
                      f"{abs(b.value - I2x) / abs(I2x):.1e} | {b.resolution:.1e}{' (flagged)' if b.under_resolved else ''} |")
+    lines += ["", "## Round-off of I₁: Parseval against the trapezoidal rule of the FFT derivative", "",
+              "first_invariant sums conj(Â_k)·2πik q̂_k over the Fourier coefficients (spectral.loop_pairing) "
+              "instead of applying the trapezoidal rule to A·(inverse FFT of 2πik q̂_k); the two are the same "
+              "number in exact arithmetic. With the trapezoid, the advected loop above read 2.5e-15 to 5.9e-15 "
+              "for N = 64 to 2000; with Parseval it reads 0 to 8.4e-16. On PoincareInvariants.jl's 4-D Hénon "
+              "map (the unit circle in both (qᵢ, pᵢ) planes, two maps, I₁ = 2π exactly, a trigonometric "
+              "polynomial of degree 16), |I₁ − 2π| over 20 phases of the sampling "
+              "(`python scripts/invariants_roundoff.py`):", ""]
+    from invariants_roundoff import errors
+    lines += ["| N | Parseval: median | worst | trapezoid of FFT derivative: median | worst |", "|---|---|---|---|---|"]
+    for N in (250, 500, 1000, 2000, 4000, 8000, 16000):
+        new, old = errors(N, np.random.default_rng(0).random(20))
+        lines.append(f"| {N:,} | {np.median(new):.1e} | {new.max():.1e} | {np.median(old):.1e} | {old.max():.1e} |")
+    lines += ["", "Parseval is 1.8× to 6× better in the median and grows with N in neither form: the rest is "
+              "the round-off of the points themselves (their coordinates reach 184 after two maps, while I₁ "
+              "is 2π). PoincareInvariants.jl's own Hénon test, on I₂ with finite differences, allows 5e-13 "
+              "after one map and 5e-12 after two."]
     text = "\n".join(lines) + "\n"
     print(text)
     (ROOT / "docs" / "invariants.md").write_text(text)

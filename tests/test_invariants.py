@@ -163,6 +163,33 @@ def test_fft_derivative_and_plan_reuse():
     assert len(spectral._PLANS) == n_plans
 
 
+def test_first_invariant_in_fourier_space_has_less_round_off():
+    """The unit circle in both (qᵢ, pᵢ) planes after two Hénon maps: I₁ = ∮ p·dq = 2π exactly (the
+    loop is a trigonometric polynomial of degree 16, resolved at N = 1000).  Over 20 phases of the
+    sampling, Parseval's sum (spectral.loop_pairing, what first_invariant computes) against the
+    trapezoidal rule of p·(inverse-FFT dq/dτ), measured: median 4.7e-13 against 2.8e-12, worst
+    1.6e-12 against 9.1e-12."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "scripts" / "invariants_roundoff.py"
+    spec = importlib.util.spec_from_file_location("invariants_roundoff", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)                 # the docs' table and this test share one experiment
+    new, old = script.errors(1000, np.random.default_rng(0).random(20))
+    assert np.median(new) < np.median(old) / 3 and max(new) < max(old) / 3
+    assert np.median(new) < 7e-13 and max(new) < 2.5e-12
+
+
+def test_loop_pairing_is_the_trapezoidal_rule_of_the_spectral_derivative(rng):
+    """Same number up to round-off, odd and even N, batched trailing axes."""
+    for N in (33, 64):
+        tau = invariants.loop_parameters(N)
+        a = np.stack([np.cos(2 * np.pi * tau) + 0.3 * np.sin(6 * np.pi * tau), np.sin(4 * np.pi * tau)], axis=1)
+        b = np.stack([np.sin(2 * np.pi * tau), np.cos(2 * np.pi * tau) ** 3], axis=1)
+        ref = spectral.loop_integral(np.sum(a * spectral.loop_derivative(b), axis=1))
+        assert abs(spectral.loop_pairing(a, b) - ref) < 1e-14 * 10
+
+
 @pytest.mark.parametrize("bad,msg", [(dict(form="magic"), "unknown form"), (dict(form="canonical"), "needs p"),
                                      (dict(form="corrected"), "needs lam")])
 def test_bad_arguments(bad, msg):
