@@ -1,8 +1,10 @@
 """Work–precision: wall time against error, VPRK pairs against scipy (docs/benchmarks.md).
 
-    python scripts/work_precision.py trajectory [--systems ...]   # docs/figures/work_precision/<system>.json
+    python scripts/work_precision.py trajectory [--systems ...] [--points 16]
+                                         # docs/figures/work_precision/<system>.json (<system>_1.json: 1 point)
     python scripts/work_precision.py invariants [--steps 10000]   # docs/figures/work_precision/invariants.json
     python scripts/work_precision.py plot                         # docs/figures/work_precision*.png
+    python scripts/work_precision.py table                        # the markdown tables of docs/benchmarks.md
 
 trajectory
     For each system, 16 points near the paper's initial condition, advanced to T = 64 h₀ (h₀ the
@@ -89,11 +91,11 @@ def trajectory(args):
         if name not in SYSTEMS:
             raise SystemExit(f"error: unknown system '{name}'; choose from {', '.join(SYSTEMS)}")
         rng = np.random.default_rng(6)
-        out = {"meta": dict(machine=platform.platform(), python=platform.python_version(), points=NPOINTS,
+        out = {"meta": dict(machine=platform.platform(), python=platform.python_version(), points=args.points,
                             T="64 h0", numpy=np.__version__)}
         centre, spread, h0 = SYSTEMS[name]
         system = integrators.system(name)
-        q0 = start_points(system, centre, spread, rng)
+        q0 = start_points(system, centre, spread, rng)[:args.points]
         T = T_STEPS * h0
         system.vector_field(q0); system.ddtheta(q0); system.ddH(q0)       # generate code outside timings
         if name == "guiding_centre_symmetric":
@@ -120,7 +122,11 @@ def trajectory(args):
                                  error=err, broke=broke, newton=sol.mean_newton_iterations))
             print(f"{name:26s} {tab:9s} {proj:10s} errors {[r['error'] for r in rows[-3:]]}", flush=True)
         out.update(system=name, T=T, h0=h0, reference_check=check, runs=rows)
-        (DATA / f"{name}.json").write_text(json.dumps(out, indent=0))
+        (DATA / data_name(name, args.points)).write_text(json.dumps(out, indent=0))
+
+
+def data_name(system, points):
+    return f"{system}.json" if points == NPOINTS else f"{system}_{points}.json"
 
 
 def invariant_errors(system, loop_q, surf_q, I1_0, I2_0):
@@ -245,17 +251,74 @@ def plot(args):
         plt.close(fig)
 
 
+THRESHOLDS = (1e-3, 1e-6, 1e-9, 1e-11)
+
+
+def fastest(runs, ok):
+    """The fastest run of ``runs`` for which ok(run) holds, or None."""
+    good = [r for r in runs if ok(r)]
+    return min(good, key=lambda r: r["wall"]) if good else None
+
+
+def _cell(r, label):
+    return ("—", "—") if r is None else (label(r), f"{1e3 * r['wall']:.0f} ms" if r["wall"] < 10 else f"{r['wall']:.0f} s")
+
+
+def table(args):
+    """The fastest VPRK pair, DOP853 and Radau run that reach each error, from the JSON files."""
+    for points in (NPOINTS, 1):
+        files = {n: DATA / data_name(n, points) for n in SYSTEMS}
+        if not any(f.exists() for f in files.values()):
+            continue
+        print(f"\n{points} point{'s' if points > 1 else ''}, trajectory error at T = 64 h₀:\n")
+        print("| system | error ≤ | fastest VPRK pair (h) | time | DOP853 (tol) | time | Radau (tol) | time | VPRK / best scipy |")
+        print("|---|---|---|---:|---|---:|---|---:|---:|")
+        for name, f in files.items():
+            if not f.exists():
+                continue
+            runs = json.loads(f.read_text())["runs"]
+            for e in THRESHOLDS:
+                reach = lambda r: r["error"] is not None and r["error"] <= e      # noqa: E731
+                v = fastest([r for r in runs if "tableau" in r], reach)
+                d = fastest([r for r in runs if r["method"] == "DOP853"], reach)
+                rd = fastest([r for r in runs if r["method"] == "Radau"], reach)
+                best = min([r["wall"] for r in (d, rd) if r is not None], default=None)
+                ratio = "—" if v is None or best is None else f"{v['wall'] / best:.2g}"
+                cells = (_cell(v, lambda r: f"{r['method']} ({r['h']:g})") + _cell(d, lambda r: f"DOP853 ({r['tol']:g})")
+                         + _cell(rd, lambda r: f"Radau ({r['tol']:g})"))
+                print(f"| {name} | {e:.0e} | " + " | ".join(cells) + f" | {ratio} |")
+    p = DATA / "invariants.json"
+    if p.exists():
+        inv = json.loads(p.read_text())
+        runs = [dict(r, error=None if r["I1"] is None else max(r["I1"], r["I2"])) for r in inv["runs"]]
+        m = inv["meta"]
+        print(f"\nInvariants, guiding_centre_symmetric, {m['steps']:,} steps of h = {m['h']:g} (T = {m['T']:g}); "
+              "error: the larger of the noncanonical I₁ and I₂ relative errors at T:\n")
+        print("| error ≤ | fastest VPRK pair | time | DOP853 (tol) | time | Radau (tol) | time |")
+        print("|---|---|---:|---|---:|---|---:|")
+        for e in (1e-6, 1e-9, 1e-11):
+            reach = lambda r: r["error"] is not None and r["error"] <= e and not r.get("broke")  # noqa: E731
+            v = fastest([r for r in runs if "tol" not in r], reach)
+            d = fastest([r for r in runs if r["method"] == "DOP853"], reach)
+            rd = fastest([r for r in runs if r["method"] == "Radau"], reach)
+            cells = (_cell(v, lambda r: r["method"]) + _cell(d, lambda r: f"DOP853 ({r['tol']:g})")
+                     + _cell(rd, lambda r: f"Radau ({r['tol']:g})"))
+            print(f"| {e:.0e} | " + " | ".join(cells) + " |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     t = sub.add_parser("trajectory")
     t.add_argument("--systems", nargs="+", default=list(SYSTEMS))
+    t.add_argument("--points", type=int, default=NPOINTS, help="points per run (16; 1 for single trajectories)")
     i = sub.add_parser("invariants")
     i.add_argument("--steps", type=int, default=10000)
     i.add_argument("--pairs", nargs="+")
     sub.add_parser("plot")
+    sub.add_parser("table")
     args = ap.parse_args()
-    {"trajectory": trajectory, "invariants": invariants, "plot": plot}[args.cmd](args)
+    {"trajectory": trajectory, "invariants": invariants, "plot": plot, "table": table}[args.cmd](args)
 
 
 if __name__ == "__main__":
