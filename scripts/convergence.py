@@ -109,9 +109,39 @@ Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
   the paper). λ_{n+1/2} is O(h) here (7.6e-5 at h = 1/64, 3.8e-5 at h = 1/128) and Newton converges in 3
   iterations, so the plateau is not a solver artefact; with σ = R(∞) = −1 the Λ terms cancel in q_{n+1}
   and an h-independent offset of 1.5e-8 remains in q(T). Open question, as above.
-* **SRK3 standard energy 3.5 vs 4, LobIIIA3/LobIIIA4 standard energy 4.7/6.9 vs 4/6**: the energy error of
-  the standard projection is not monotone in h at these step sizes (see plot); the solution orders agree
-  with the paper (4.07, 4.02, 6.06).
+* **SRK3 standard energy 3.5 vs 4: the asymptotic order is 3, settled below.** LobIIIA3/LobIIIA4
+  standard energy 4.7/6.9 vs 4/6: not followed further; the solution orders agree with the paper (4.02,
+  6.06).
+
+## SRK3 + standard: energy order 3, not 4
+
+Followed to round-off (`python scripts/srk3_standard_order.py`; energy and momentum errors against
+t = 0, no reference solution):
+
+| h | energy error | local order | momentum error | local order |
+|---|---|---|---|---|
+| 2^-1 | 6.474e-05 |  | 5.884e-06 |  |
+| 2^-2 | 5.139e-06 | 3.66 | 7.026e-07 | 3.07 |
+| 2^-3 | 3.678e-07 | 3.80 | 8.942e-08 | 2.97 |
+| 2^-4 | 2.594e-08 | 3.83 | 1.126e-08 | 2.99 |
+| 2^-5 | 1.927e-09 | 3.75 | 1.411e-09 | 3.00 |
+| 2^-6 | 1.613e-10 | 3.58 | 1.765e-10 | 3.00 |
+| 2^-7 | 1.563e-11 | 3.37 | 2.207e-11 | 3.00 |
+| 2^-8 | 1.702e-12 | 3.20 | 2.757e-12 | 3.00 |
+| 2^-9 | 1.987e-13 | 3.10 | 3.437e-13 | 3.00 |
+| 2^-10 | 2.388e-14 | 3.06 | 4.485e-14 | 2.94 |
+| 2^-11 | 3.095e-15 | 2.95 | 5.940e-15 | 2.92 |
+| 2^-12 | 7.286e-16 | 2.09 | 3.414e-15 | 0.80 |
+| 2^-13 | 2.914e-16 | 1.32 | 5.440e-15 | -0.67 |
+
+fit over 10 h (energy error > 1e-14): e(h) = 1.158e-03 h^4 + 2.454e-05 h^3, largest relative residual 16.6%; the terms are equal at h = 0.0212
+
+The local order falls monotonically from 3.83 (h = 1/16) to 3.06 (h = 1/1024) and 2.95 (h = 1/2048, the
+last h above round-off), while the momentum's is 3.00 throughout. The energy error is the sum of an h⁴
+term and an h³ term whose coefficient is about 50× smaller: the h⁴ term dominates for h above about
+1/50, where the paper's table (4) and our 3.47 over h = 1/32 … 1/128 were measured, and the h³ term
+below. The standard projection of SRK3 therefore has energy order 3, the same as its momentum order
+(tab:convergence_momentum: 3); the paper's 4 is the pre-asymptotic slope.
 """
 
 
