@@ -170,10 +170,10 @@ def test_results_are_bitwise_identical_for_1_2_and_3_ranks(tmp_path):
 
 def test_kill_and_resume_gives_the_same_bits(tmp_path):
     scene = tmp_path / "small.toml"
-    scene.write_text(edit(SMALL, "steps = 40", "steps = 1000"))
+    scene.write_text(edit(SMALL, "steps = 40", "steps = 500"))
     full, part = tmp_path / "full.h5", tmp_path / "part.h5"
     rc_full = poincare("run", str(scene), "-o", str(full), "-q").returncode
-    assert rc_full in (0, 1)              # 1: the 64-point loop is sheared out of resolution by t = 10⁴
+    assert rc_full in (0, 1)              # 1 if the 64-point loop is sheared out of resolution
     proc = subprocess.Popen([shutil.which("poincare") or str(Path(sys.executable).parent / "poincare"),
                              "run", str(scene), "-o", str(part), "-q"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -191,10 +191,10 @@ def test_kill_and_resume_gives_the_same_bits(tmp_path):
     proc.wait()
     with h5py.File(part, "r") as f:                     # readable, complete up to its last output
         done = f["runs/GLRK1-none"]
-        assert done["t"].shape[0] == 251 and done["I1/canonical"].shape[0] == 251
+        assert done["t"].shape[0] == 126 and done["I1/canonical"].shape[0] == 126
         g = f["runs/GLRK1-symplectic"]
         n = g["t"].shape[0]
-        assert 5 <= n < 251 and all(g[k].shape[0] == n for k in ("I1/noncanonical", "I2/corrected", "energy_error"))
+        assert 5 <= n < 126 and all(g[k].shape[0] == n for k in ("I1/noncanonical", "I2/corrected", "energy_error"))
         assert np.array_equal(g["t"][...], 10.0 * 4 * np.arange(n))
     r = poincare("run", str(scene), "-o", str(part), "-q")
     assert r.returncode == 2 and "--resume" in r.stderr

@@ -1,0 +1,120 @@
+"""Which details move the step at which an unprojected even-stage Gauss–Legendre run breaks down on
+Lotka–Volterra (docs/benchmarks.md, "Why GLRK2 breaks down at step 74,564 and not 250,000").
+
+    python scripts/breakdown_sensitivity.py [--pairs GLRK2 GLRK4] [--steps 1000000] [--json out.json]
+
+The paper's case: lotka_volterra_2d, q₀ = (1, 1), h = 0.1, no projection.  Variants, each a batch of
+points advanced together (points are independent; the engine is bitwise the same for any batch):
+  baseline        p₀ = ϑ(q₀), the double + correction coefficients
+  p0 ± ulps       p₀ = ϑ(q₀) with each component moved by −2 … +2 ulps (24 random patterns)
+  q0 ± ulps       q₀ moved by −2 … +2 ulps per component, p₀ = ϑ(q₀) (24 patterns)
+  plain double    the same baseline with the coefficients rounded to double (corrections dropped)
+For each: the breakdown step (or "completed") of every point, and the spread over the batch.
+
+    python scripts/breakdown_sensitivity.py --newton-tol 8.9e-16 1e-12 1e-10 [--steps 150000]
+
+runs GLRK2 instead on the numpy engine of tests/numpy_engine.py (the compiled engine's oracle, same
+rules; its tolerance is a keyword there, a compile-time constant in the kernel) with Newton's
+convergence tolerance set to each value: max |δ|/scale ≤ tol (4 eps = 8.9e-16 in both engines).
+"""
+import argparse
+import dataclasses
+import json
+import time
+
+import numpy as np
+
+import integrators
+from integrators.integrate import integrate
+
+
+def ulps(x, k):
+    """x moved by k ulps (k an integer array of x's shape)."""
+    out = x.copy()
+    for _ in range(int(np.max(np.abs(k))) if k.size else 0):
+        step = np.abs(k) > 0
+        out = np.where(step, np.nextafter(out, np.where(k > 0, np.inf, -np.inf)), out)
+        k = k - np.sign(k)
+    return out
+
+
+def breakdown_steps(system, q0, p0, tab, h, steps):
+    sol = integrate(system, q0, tab, "none", h, steps=steps, save_every=steps, p0=p0)
+    return [int(n) + 1 if np.isfinite(t) else None for n, t in zip(sol.steps_taken, sol.breakdown_time)]
+
+
+def summary(name, steps_list, total):
+    done = [s for s in steps_list if s is not None]
+    text = f"{len(steps_list) - len(done)} of {len(steps_list)} completed {total:,} steps"
+    if done:
+        text = (f"broke down at {min(done):,} … {max(done):,} (median {int(np.median(done)):,}); " + text)
+    return dict(variant=name, steps=steps_list, summary=text)
+
+
+def newton_tolerance(args):
+    """GLRK2 unprojected on the numpy engine with each Newton tolerance: the breakdown step."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import numpy_engine
+    system = integrators.system("lotka_volterra_2d")
+    h, q = 0.1, np.array([[1.0, 1.0]])
+    out = []
+    for tol in args.newton_tol:
+        numpy_engine.newton.__kwdefaults__["tol"] = tol
+        st = numpy_engine.Stepper(system, integrators.tableau("GLRK2"), "none", h)
+        S = numpy_engine.State(q, system.theta(q), np.zeros_like(q), h, st.s)
+        t0 = time.perf_counter()
+        k = 0
+        while S.live[0] and k < args.steps:
+            k += 1
+            numpy_engine.advance(st, S, k * h)
+            if k % 1000 == 0:
+                S.forget_jacobians()          # as the compiled engine does at each output
+        row = dict(tol=tol, breakdown_step=None if S.live[0] else k, steps=args.steps,
+                   wall_s=round(time.perf_counter() - t0, 1))
+        print(f"GLRK2-none numpy engine, Newton tol {tol:.1e}: "
+              + (f"broke down at step {k:,}" if not S.live[0] else f"completed {args.steps:,} steps"), flush=True)
+        out.append(row)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--pairs", nargs="+", default=["GLRK2", "GLRK4"])
+    ap.add_argument("--steps", type=int, default=1_000_000)
+    ap.add_argument("--json")
+    ap.add_argument("--newton-tol", nargs="+", type=float)
+    args = ap.parse_args()
+    if args.newton_tol:
+        return newton_tolerance(args)
+    system = integrators.system("lotka_volterra_2d")
+    h, q = 0.1, np.array([1.0, 1.0])
+    rng = np.random.default_rng(0)
+    kp = rng.integers(-2, 3, (24, 2))
+    kq = rng.integers(-2, 3, (24, 2))
+    out = []
+    for name in args.pairs:
+        tab = integrators.tableau(name)
+        plain = dataclasses.replace(tab, name=tab.name + "-plain", a_lo=0 * tab.a_lo, abar_lo=0 * tab.abar_lo,
+                                    b_lo=0 * tab.b_lo)
+        p = system.theta(q)
+        t0 = time.perf_counter()
+        rows = [summary("baseline", breakdown_steps(system, q[None], p[None], tab, h, args.steps), args.steps),
+                summary("p0 ± ulps", breakdown_steps(system, np.repeat(q[None], 24, 0), ulps(np.repeat(p[None], 24, 0), kp),
+                                                     tab, h, args.steps), args.steps),
+                summary("q0 ± ulps", breakdown_steps(system, ulps(np.repeat(q[None], 24, 0), kq), None, tab, h, args.steps),
+                        args.steps),
+                summary("plain double", breakdown_steps(system, q[None], p[None], plain, h, args.steps), args.steps)]
+        for r in rows:
+            print(f"{name}-none  {r['variant']:14s} {r['summary']}", flush=True)
+        out.append(dict(tableau=name, h=h, q0=q.tolist(), wall_s=round(time.perf_counter() - t0, 1), rows=rows))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
