@@ -124,7 +124,6 @@ def chebyshev_values(c, axis):
 
 def chebyshev_derivative(v, axis):
     """∂v/∂x along ``axis`` for values at Chebyshev points on [0, 1]."""
-    n = v.shape[axis]
     c = chebyshev_coefficients(v, axis)
     dc = C.chebder(c, axis=axis, scl=2.0)  # d/dx = 2 d/dξ for x = (1 + ξ)/2
     pad = [(0, 0)] * v.ndim

@@ -444,7 +444,7 @@ class Stepper:
         step), ``Y``/``mu`` (for the next guess), ``ok`` (n,), ``iterations`` (n,) and
         ``jinv`` (the inverse Jacobians at the end of the solve, for the next step).
         """
-        sysm, tab, h, sig = self.system, self.tableau, self.h, self.sigma
+        sig = self.sigma
         s, d = self.s, self.d
         proj = self.projection
         n = q.shape[0]

@@ -1,5 +1,4 @@
 """The service: scene validation, driver output, rank-count independence, kill and resume, plots, CLI."""
-import os
 import shutil
 import signal
 import subprocess

@@ -77,3 +77,33 @@ def test_stability_script_records_and_resumes(tmp_path):
     assert recs[1]["energy"]["max"] > 0 and len(recs[1]["energy"]["envelope"]) > 5
     r = subprocess.run(cmd, check=True, capture_output=True, text=True)     # resumed: nothing left to run
     assert r.stdout == "" and len(out.read_text().splitlines()) == 2
+
+
+def test_glrk2_unprojected_breaks_down_near_step_74000_whatever_the_last_bits(lv):
+    """scripts/breakdown_sensitivity.py's cheap end: the unprojected GLRK2 run breaks down at step
+    74,191 from p₀ = ϑ(q₀), and at 71,017 … 74,564 with p₀ moved by ±1–2 ulps (measured over 24
+    patterns) — never near the paper's 250,000, so the last bits do not explain the difference."""
+    q = np.array([[1.0, 1.0]])
+    p = lv.theta(q)
+    p_moved = np.array([[np.nextafter(p[0, 0], 2.0), np.nextafter(np.nextafter(p[0, 1], 0.0), 0.0)]])
+    sol = integrate(lv, np.repeat(q, 2, 0), "GLRK2", "none", 0.1, steps=80000, save_every=80000,
+                    p0=np.concatenate([p, p_moved]))
+    steps = sol.steps_taken + 1
+    assert np.all(np.isfinite(sol.breakdown_time))
+    assert steps[0] == 74191 and 70000 <= steps[1] <= 75000
+
+
+def test_srk3_standard_energy_order_is_three_asymptotically():
+    """docs/convergence.md: on point vortices (T = 2) the local energy order of SRK3 + standard is
+    3.75 between h = 1/16 and 1/32 and 3.06 between 1/512 and 1/1024; the momentum's is 3.00."""
+    sy = integrators.system("point_vortices")
+    q0 = np.array([1.0, 0.1, 1.0, -0.1])
+
+    def errors(h):
+        q = integrate(sy, q0, "SRK3", "standard", h, steps=int(round(2.0 / h)), save_every=1).q[:, 0]
+        return np.max(np.abs(sy.H(q) - sy.H(q[0]))), np.max(np.abs(sy.momentum(q) - sy.momentum(q[0])))
+
+    (e16, _), (e32, _) = errors(1 / 16), errors(1 / 32)
+    (e512, p512), (e1024, p1024) = errors(1 / 512), errors(1 / 1024)
+    assert math.log2(e16 / e32) > 3.6
+    assert 2.9 < math.log2(e512 / e1024) < 3.2 and abs(math.log2(p512 / p1024) - 3) < 0.1
