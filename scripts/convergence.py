@@ -1,10 +1,12 @@
 """Convergence orders on point vortices next to tab:convergence_energy / tab:convergence_momentum.
 
-Reference: scipy DOP853 (rtol 1e-14, atol 1e-16) on the explicit ODE Ω̄ q̇ = ∇H,
-independent of our integrators.  Errors at T = 2 for h = 2^-1 … 2^-7:
-solution error |q(T) − q_ref(T)|_∞, energy error max_t |H − H_0|, momentum error
-max_t |P − P_0|.  The order is the least-squares slope of log error against log h
-over the last three h whose error is above 1e-12 (round-off floor excluded).
+Reference: mpmath's Taylor integrator (``mpmath.odefun``) on the explicit ODE Ω̄ q̇ = ∇H in 30-digit
+arithmetic from the same double initial point and parameters, checked against a 36-digit run (their
+difference is recorded as ``reference_check``): independent of our integrators and far below double
+round-off, so no reference floor remains.  Errors at T = 2 for h = 2^-1 … 2^-9: solution error
+|q(T) − q_ref(T)|_∞, energy error max_t |H − H_0|, momentum error max_t |P − P_0|.  The order is the
+least-squares slope of log error against log h over the last three h before the error first falls to
+the quantity's round-off floor (FLOORS: where double-precision round-off of the method takes over).
 
     python scripts/convergence.py            # writes docs/convergence.md and docs/figures/convergence.json
 """
@@ -20,10 +22,31 @@ import integrators
 
 ROOT = Path(__file__).resolve().parents[1]
 T = 2.0
-HS = [2.0 ** -k for k in range(1, 8)]
-TABLEAUS = ["GLRK1", "GLRK2", "GLRK3", "GLRK4", "LobIIIA2", "LobIIIA3", "LobIIIA4", "SRK3"]
+HS = [2.0 ** -k for k in range(1, 10)]
+TABLEAUS = ["GLRK1", "GLRK2", "GLRK3", "GLRK4", "GLRK5", "GLRK6", "LobIIIA2", "LobIIIA3", "LobIIIA4",
+            "LobIIIB2", "LobIIIB3", "LobIIIB4", "SRK3"]
 PROJ = list(integrators.PROJECTIONS)
-FLOOR = 1e-12
+# round-off floors (absolute): below them double-precision round-off of the method, not its order,
+# sets the error (|q| ~ 1, |H| ~ 5e-3, |P| ~ 0.2 here; measured where the local orders collapse)
+FLOORS = {"solution": 1e-14, "energy": 2e-15, "momentum": 1e-14}
+
+
+def mp_reference(system, q0, T, dps):
+    """q(T) by mpmath's Taylor-series integrator in ``dps`` digits (returned as floats and as strings)."""
+    import mpmath
+    import sympy
+    exact = {k: sympy.Rational(float(v)) for k, v in system.params.items()}    # the doubles, exactly
+    th = [t.subs(exact) for t in system.theta_expr]
+    H = system.H_expr.subs(exact)
+    q = system.q
+    Om = [[sympy.diff(th[j], q[i]) - sympy.diff(th[i], q[j]) for j in range(len(q))] for i in range(len(q))]
+    f_Om = sympy.lambdify(q, Om, "mpmath")
+    f_dH = sympy.lambdify(q, [sympy.diff(H, x) for x in q], "mpmath")
+    with mpmath.workdps(dps):
+        def F(t, y):
+            return list(mpmath.lu_solve(mpmath.matrix(f_Om(*y)), mpmath.matrix(f_dH(*y))))
+        y = mpmath.odefun(F, 0, [mpmath.mpf(float(x)) for x in q0], tol=mpmath.mpf(10) ** (2 - dps), degree=20)(T)
+        return np.array([float(v) for v in y]), [mpmath.nstr(v, dps - 2) for v in y]
 
 
 def paper_orders(tab, proj):
@@ -44,8 +67,17 @@ def paper_orders(tab, proj):
     return e, m
 
 
-def fit(hs, errs):
-    pts = [(h, e) for h, e in zip(hs, errs) if np.isfinite(e) and e > FLOOR]
+def fit(hs, errs, floor):
+    """Least-squares slope over the last three h before the error first falls to the floor (h from
+    large to small; h at which the run broke down are skipped while none has been kept).  Later h are left out even where their error is above the floor again: there
+    round-off, accumulated over more steps, has taken over (it scatters between 1e-16 and 1e-13)."""
+    pts = []
+    for h, e in zip(hs, errs):
+        if not np.isfinite(e) and not pts:
+            continue                          # broke down at the largest h: start below them
+        if not np.isfinite(e) or e <= floor:
+            break
+        pts.append((h, e))
     if len(pts) < 2:
         return float("nan")
     pts = pts[-3:]
@@ -56,11 +88,15 @@ def fit(hs, errs):
 def main():
     sy = integrators.system("point_vortices")
     q0 = np.array(sy.defaults["q0"])
-    ref = solve_ivp(lambda t, q: sy.vector_field(q[None])[0], (0, T), q0, method="DOP853",
+    t_start = time.time()
+    ref, ref_digits = mp_reference(sy, q0, T, 30)
+    check = float(np.max(np.abs(np.array([float(x) for x in mp_reference(sy, q0, T, 36)[1]]) - ref)))
+    dop = solve_ivp(lambda t, q: sy.vector_field(q[None])[0], (0, T), q0, method="DOP853",
                     rtol=1e-14, atol=1e-16).y[:, -1]
+    print(f"reference {ref_digits}; 30 vs 36 digits: {check:.1e}; DOP853 at 1e-14 off by "
+          f"{np.max(np.abs(dop - ref)):.1e}", flush=True)
     H0, P0 = sy.H(q0), sy.momentum(q0)
     rows = []
-    t_start = time.time()
     for tab in TABLEAUS:
         for proj in PROJ:
             e_sol, e_H, e_P = [], [], []
@@ -75,15 +111,18 @@ def main():
                 e_P.append(float(np.max(np.abs(sy.momentum(q) - P0))))
             pe, pm = paper_orders(tab, proj)
             rows.append(dict(tableau=tab, projection=proj, h=HS, solution_error=e_sol, energy_error=e_H,
-                             momentum_error=e_P, order_solution=fit(HS, e_sol), order_energy=fit(HS, e_H),
-                             order_momentum=fit(HS, e_P), paper_energy=pe, paper_momentum=pm))
+                             momentum_error=e_P, order_solution=fit(HS, e_sol, FLOORS["solution"]),
+                             order_energy=fit(HS, e_H, FLOORS["energy"]),
+                             order_momentum=fit(HS, e_P, FLOORS["momentum"]), paper_energy=pe, paper_momentum=pm))
             r = rows[-1]
             print(f"{tab:9s} {proj:10s} sol {r['order_solution']:5.2f} H {r['order_energy']:5.2f} (paper {pe}) "
                   f"P {r['order_momentum']:5.2f} (paper {pm})", flush=True)
     out = ROOT / "docs" / "figures"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "convergence.json").write_text(json.dumps(rows, indent=1))
-    write_markdown(rows, time.time() - t_start)
+    (out / "convergence.json").write_text(json.dumps(dict(reference=ref_digits, reference_check=check,
+                                                          dop853_error=float(np.max(np.abs(dop - ref))),
+                                                          floors=FLOORS, runs=rows), indent=1))
+    write_markdown(rows, time.time() - t_start, check, float(np.max(np.abs(dop - ref))))
 
 
 DISCUSSION = """
@@ -92,26 +131,34 @@ DISCUSSION = """
 Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
 (`python scripts/convergence_plots.py`).
 
-* **Reference floor.** The DOP853 reference is good to about 1e-12 absolute at T = 2, so solution errors
-  below ~1e-12 are the reference's, not the method's. GLRK4 with standard/symmetric/symplectic reaches
-  that floor by h = 1/16: its fitted solution orders (7.4–7.5) and energy orders (9.4) come from the three
-  largest h only, i.e. from the pre-asymptotic range. Not a disagreement with the paper's 2s = 8.
-* **Momentum orders above the paper (GLRK2 symmetric 8.4 and symplectic 7.0 vs 6, GLRK3 symplectic 9.5
-  vs 8, LobIIIA4 symplectic 9.5 vs 8).** The momentum errors fall faster than the paper's 2s + 2 over our
-  h range and reach round-off (1e-15) at h ≈ 1/32; the fitted slope mixes the asymptotic and the
-  round-off range. We measure at least the paper's order everywhere here; whether the asymptotic order
-  is higher needs quadruple precision (not done).
-* **LobIIIA4 midpoint: 4.0 for all three errors vs the paper's 2s − 2 = 6.** Clean straight lines of slope
-  4 over two decades (see the plot): this is a real difference. Our midpoint projection follows the
+* **No reference floor any more; the floor is now double precision.** The mpmath reference agrees with a
+  36-digit run to the last bit of a double, so every solution error above 1e-14 is the method's (the
+  DOP853 reference used before was off by 4.1e-14, which hid GLRK4's order: 7.4–7.5 then, 7.95–8.01
+  now). What remains is the round-off of the method itself: the high-order projected methods reach
+  1e-14 to 1e-16 within one to three halvings of h = 1/2, so their fits use two or three points at the
+  largest h, where the local order is still falling towards its limit.
+* **Energy orders of GLRK4 + standard/symmetric/symplectic 8.7–8.8 vs 8.** Local orders 9.4 then 8.1
+  (8.2e-9 → 1.2e-11 → 4.4e-14) before round-off: falling to the paper's 8. Agrees.
+* **Momentum orders above the paper (GLRK2 symmetric 7.4 vs 6, GLRK3 symplectic 9.1 vs 8, GLRK4
+  symplectic 11.9 vs 10, GLRK4 midpoint 6.7 vs 6, LobIIIA4 symmetric/symplectic 7.5/9.3 vs 8,
+  LobIIIB3/IIIB4 symmetric 8.7/9.6 vs 6/8).** The momentum errors start at 1e-10 or below at h = 1/2
+  and reach round-off within two or three halvings; the local orders fall towards the paper's (GLRK2
+  symmetric 8.4 then 6.4; GLRK4 midpoint 7.3, 6.2, 5.9). Nowhere below the paper; whether the
+  asymptotic order is higher than the paper's cannot be decided in double precision on this problem.
+* **GLRK6 with a projection: 10.0–10.2 vs 12, momentum and energy n/a.** The solution error falls from
+  1.6e-10 (h = 1/2) to 1.4e-13 (h = 1/4) and is at round-off from h = 1/8: one slope, pre-asymptotic.
+  The twelfth order needs larger h or quadruple precision (not done). GLRK6 + midpoint 7.1/7.5/9.5 vs 8:
+  the same two-point situation.
+* **LobIIIA4 and LobIIIB4 midpoint: 4.0 for all three errors vs the paper's 2s − 2 = 6.** Clean straight
+  lines of slope 4 over two decades (see the plot): this is a real difference. Our midpoint projection follows the
   R(∞)-signed table (σ = −1 for LobIIIA4); the paper's printed eq:symplectic_midpoint_projection has no σ.
   Open question, recorded for the audit issue.
 * **SRK3 midpoint solution error: slope 4 down to 1e-8, then flat** (energy 4.0 and momentum 2.0 agree with
   the paper). λ_{n+1/2} is O(h) here (7.6e-5 at h = 1/64, 3.8e-5 at h = 1/128) and Newton converges in 3
   iterations, so the plateau is not a solver artefact; with σ = R(∞) = −1 the Λ terms cancel in q_{n+1}
   and an h-independent offset of 1.5e-8 remains in q(T). Open question, as above.
-* **SRK3 standard energy 3.5 vs 4: the asymptotic order is 3, settled below.** LobIIIA3/LobIIIA4
-  standard energy 4.7/6.9 vs 4/6: not followed further; the solution orders agree with the paper (4.02,
-  6.06).
+* **SRK3 standard energy 3.15 vs 4: the asymptotic order is 3, settled below.** (LobIIIA3/LobIIIA4
+  standard, 4.7/6.9 against the DOP853 reference and the old fit, now read 3.90/5.82: they agree.)
 
 ## SRK3 + standard: energy order 3, not 4
 
@@ -145,13 +192,18 @@ below. The standard projection of SRK3 therefore has energy order 3, the same as
 """
 
 
-def write_markdown(rows, wall):
+def write_markdown(rows, wall, check, dop):
     lines = ["# Convergence orders on point vortices", "",
-             "Produced by `python scripts/convergence.py` (wall time %.0f s on one core; raw errors in "
-             "`docs/figures/convergence.json`)." % wall, "",
-             "Setup: point vortices with γ = (0.1, 0.1), q₀ = (1, 0.1, 1, −0.1), T = 2, h = 2⁻¹ … 2⁻⁷. "
-             "Reference: scipy DOP853 (rtol 1e-14) on Ω̄ q̇ = ∇H. Orders are least-squares slopes over the "
-             "last three h with error above 1e-12. Columns: measured order of the solution error, of the "
+             "Produced by `python scripts/convergence.py` (wall time %.0f s, the reference included; raw "
+             "errors in `docs/figures/convergence.json`)." % wall, "",
+             "Setup: point vortices with γ = (0.1, 0.1), q₀ = (1, 0.1, 1, −0.1), T = 2, h = 2⁻¹ … 2⁻⁹. "
+             "Reference: mpmath's Taylor integrator in 30 digits on Ω̄ q̇ = ∇H (against 36 digits: "
+             + ("identical once rounded to double" if check == 0 else f"{check:.0e}") +
+             f"; the DOP853 reference used before, rtol 1e-14, is off by {dop:.1e}, which was "
+             "its floor). Orders are least-squares slopes over the last three h before the error first "
+             "falls to the round-off floor of double precision (absolute: solution 1e-14, energy 2e-15, "
+             "momentum 1e-14; |H| ≈ 5e-3, |P| ≈ 0.2); n/a where fewer than two h lie above it. Columns: "
+             "measured order of the solution error, of the "
              "energy error and of the angular-momentum error; the paper's order (tab:convergence_energy, "
              "tab:convergence_momentum) in brackets. **bold** marks a difference larger than 0.5.", "",
              "| tableau | projection | solution | energy [paper] | momentum [paper] |", "|---|---|---|---|---|"]

@@ -14,7 +14,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main():
-    rows = json.loads((ROOT / "docs" / "figures" / "convergence.json").read_text())
+    data = json.loads((ROOT / "docs" / "figures" / "convergence.json").read_text())
+    rows = data["runs"] if isinstance(data, dict) else data
     bad = [r for r in rows
            if any(np.isfinite(r[k]) and abs(r[k] - r[p]) > 0.5
                   for k, p in (("order_solution", "paper_energy"), ("order_energy", "paper_energy"),
@@ -29,7 +30,8 @@ def main():
             ax.loglog(h, r[key], m, ms=4, label=lab)
         for p, ls in ((r["paper_energy"], ":"), (r["paper_momentum"], "--")):
             ax.loglog(h, 1e-3 * (h / h[0]) ** p, "k" + ls, lw=0.8)
-        ax.axhline(1e-12, color="grey", lw=0.5)
+        for floor in sorted(set((data.get("floors") or {"reference": 1e-12}).values())):
+            ax.axhline(floor, color="grey", lw=0.5)           # round-off floors below which no order is fitted
         ax.set_title(f"{r['tableau']}-{r['projection']}  paper: {r['paper_energy']}/{r['paper_momentum']}", fontsize=9)
         ax.set_xlabel("h")
         ax.set_ylabel("error")
