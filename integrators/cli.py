@@ -124,7 +124,8 @@ def cmd_run(args) -> int:
               flush=True)
         from .engine import kernel_cached
         if not kernel_cached():
-            print("compiling the step engine (once per machine, about 40 s on 2 cores) ...", flush=True)
+            print("compiling the step engine (once per machine, about 40 s on 2 cores; the first pair's wall "
+                  "time below includes it) ...", flush=True)
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,

@@ -67,6 +67,12 @@ class Tableau:
         return float(max(abs(b[i] * ab[i, j] + b[j] * a[j, i] - b[i] * b[j])
                          for i in range(s) for j in range(s)))
 
+    def rounded(self) -> "Tableau":
+        """The same tableau with its coefficients rounded to double: the corrections a_lo, ā_lo, b_lo
+        dropped (the plain-double variant of sec:app_energy_drift's comparison)."""
+        return dataclasses.replace(self, a_lo=np.zeros_like(self.a_lo), abar_lo=np.zeros_like(self.abar_lo),
+                                   b_lo=np.zeros_like(self.b_lo))
+
     @property
     def digest(self) -> str:
         """SHA-256 of every coefficient the step uses (a, ā, b with their corrections, c, d), bit for

@@ -18,7 +18,6 @@ rules; its tolerance is a keyword there, a compile-time constant in the kernel) 
 convergence tolerance set to each value: max |δ|/scale ≤ tol (4 eps = 8.9e-16 in both engines).
 """
 import argparse
-import dataclasses
 import json
 import time
 
@@ -98,8 +97,7 @@ def main():
     out = []
     for name in args.pairs:
         tab = integrators.tableau(name)
-        plain = dataclasses.replace(tab, name=tab.name + "-plain", a_lo=0 * tab.a_lo, abar_lo=0 * tab.abar_lo,
-                                    b_lo=0 * tab.b_lo)
+        plain = tab.rounded()
         p = system.theta(q)
         t0 = time.perf_counter()
         rows = [summary("baseline", breakdown_steps(system, q[None], p[None], tab, h, args.steps), args.steps),

@@ -181,7 +181,7 @@ def test_first_invariant_in_fourier_space_has_less_round_off():
 
 
 def test_loop_pairing_is_the_trapezoidal_rule_of_the_spectral_derivative(rng):
-    """Same number up to round-off, odd and even N, batched trailing axes."""
+    """Same number up to round-off, for odd and even N."""
     for N in (33, 64):
         tau = invariants.loop_parameters(N)
         a = np.stack([np.cos(2 * np.pi * tau) + 0.3 * np.sin(6 * np.pi * tau), np.sin(4 * np.pi * tau)], axis=1)
