@@ -1,4 +1,4 @@
-"""Variational partitioned Runge–Kutta integrators with the projections of
+"""The numerical core: variational partitioned Runge–Kutta integrators with the projections of
 "Projected Variational Integrators for Degenerate Lagrangian Systems".
 
 Public API::
@@ -7,15 +7,18 @@ Public API::
     sys = integrators.system("point_vortices", gamma=(0.1, 0.1))
     tab = integrators.tableau("GLRK2")
     sol = integrators.integrate(sys, q0, tableau=tab, projection="symmetric", h=0.1, steps=1000)
+
+The batch-run service (scenes, the MPI driver, HDF5 output, plots, the CLI) is the subpackage
+:mod:`integrators.service` and the symplecticity audit is :mod:`integrators.audit`; no module of
+the core imports either.
 """
 from .integrate import Solution, integrate
 from .engine import Engine, State, march, set_threads
-from .output import Run, read_run
 from .projections import PROJECTIONS
 from .systems import SYSTEM_NAMES, System, system, system_from
 from .tableaus import TABLEAU_NAMES, Tableau, tableau, tableau_from_arrays, tableau_from_file
 
 __all__ = ["integrate", "Solution", "system", "system_from", "System", "SYSTEM_NAMES", "tableau",
            "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Engine", "State", "march",
-           "set_threads", "read_run", "Run"]
+           "set_threads"]
 __version__ = "0.1.0"

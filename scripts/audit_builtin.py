@@ -17,7 +17,7 @@ import numpy as np
 import integrators
 from integrators import audit
 from integrators.engine import Engine
-from integrators.scene import load_scene
+from integrators.service.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFECT_SCENES = ("guiding_centre_tokamak", "point_vortices")

@@ -67,28 +67,37 @@ def scene_text(name, steps, loop=2000, surf=(100, 100), tableaus=("GLRK2",), pro
                        steps=steps, forms=json.dumps(list(forms)))
 
 
-def child(scene_path, out):
-    from integrators import driver
-    from integrators.scene import load_scene
-    comm = driver.communicator()
+def child(scene_path, out, threads=None):
+    from integrators.service import driver
+    from integrators.service.scene import load_scene
+    from integrators.service.ranks import communicator, default_threads
+    comm = communicator()
+    threads = threads or default_threads(comm)
     scene = load_scene(scene_path)
     t0 = time.perf_counter()
-    summaries = driver.run(scene, out, force=True, comm=comm, progress=False)
+    summaries = driver.run(scene, out, force=True, comm=comm, progress=False, threads=threads)
     wall = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB (Linux reports KiB)
     rss_all = comm.gather(rss, root=0)
     if comm.rank == 0:
-        phases = {}
+        phases, per_rank = {}, [{} for _ in range(comm.size)]
         for s in summaries:
             for k, v in s.timings.items():
-                phases[k] = phases.get(k, 0.0) + v
-        print(json.dumps(dict(wall=wall, ranks=comm.size, peak_rss_mib=rss_all, phases=phases)))
+                if k != "per_rank":
+                    phases[k] = phases.get(k, 0.0) + v
+            for r, c in enumerate(s.timings.get("per_rank", [])):
+                for k, v in c.items():
+                    per_rank[r][k] = per_rank[r].get(k, 0) + v
+        print(json.dumps(dict(wall=wall, ranks=comm.size, threads=threads, peak_rss_mib=rss_all, phases=phases,
+                              per_rank=per_rank, pairs={s.pair: {k: v for k, v in s.timings.items() if k != "per_rank"}
+                                                        for s in summaries})))
 
 
-def _command(text, ranks, tmp, out_name):
+def _command(text, ranks, tmp, out_name, threads=None):
     path = Path(tmp) / f"{out_name}.toml"
     path.write_text(text)
     cmd = [sys.executable, __file__, "--child", str(path), str(Path(tmp) / out_name)]
+    cmd += ["--threads", str(threads)] if threads else []
     if ranks > 1:
         mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
         cmd = [mpiexec, "-n", str(ranks)] + cmd
@@ -99,8 +108,8 @@ def _result(stdout):
     return json.loads(stdout.strip().splitlines()[-1])
 
 
-def measure(text, ranks, tmp, out_name="out.h5"):
-    r = subprocess.run(_command(text, ranks, tmp, out_name), capture_output=True, text=True, check=True)
+def measure(text, ranks, tmp, out_name="out.h5", threads=None):
+    r = subprocess.run(_command(text, ranks, tmp, out_name, threads), capture_output=True, text=True, check=True)
     return _result(r.stdout)
 
 
@@ -156,7 +165,7 @@ def identical_files(a, b):
 
 
 def paper_experiment(out, ranks_list=(1, 2)):
-    text = (ROOT / "integrators" / "scenes" / "paper_poincare.toml").read_text()
+    text = (ROOT / "integrators" / "service" / "scenes" / "paper_poincare.toml").read_text()
     res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), scene="paper_poincare")}
     with tempfile.TemporaryDirectory() as tmp:
         for ranks in ranks_list:
@@ -196,6 +205,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--child", nargs=2)
+    ap.add_argument("--threads", type=int, default=None, help="threads per rank (default: the cores shared)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "benchmark_service.json"))
     ap.add_argument("--scale", action="store_true", help="10^5 and 10^6 loop points on 1 and 2 ranks")
     ap.add_argument("--paper", action="store_true", help="the full paper scene on 1 and 2 ranks (about 30 min)")
@@ -205,7 +215,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=2, help="rounds for --contention")
     args = ap.parse_args()
     if args.child:
-        return child(*args.child)
+        return child(*args.child, threads=args.threads)
     if args.scale:
         return scale(ROOT / "docs" / "figures" / "benchmark_scale.json")
     if args.contention:

@@ -20,8 +20,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from integrators.driver import run
-from integrators.scene import builtin_scenes, load_scene
+from integrators.service.driver import run
+from integrators.service.scene import builtin_scenes, load_scene
 from invariants import UNDER_RESOLVED
 
 

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import integrators
-from integrators import audit, cli
-from integrators.scene import load_scene, parse_scene
+from integrators import audit
+from integrators.service import cli
+from integrators.service.scene import load_scene, parse_scene
 
 import audit_maps  # noqa: E402  (tests/ is on sys.path under pytest)
 

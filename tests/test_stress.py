@@ -5,8 +5,8 @@ import pytest
 
 import integrators
 import invariants
-from integrators import driver
-from integrators.scene import parse_scene
+from integrators.service import driver
+from integrators.service.scene import parse_scene
 
 SCENE = """
 name = "stress"

@@ -37,7 +37,7 @@ def test_a_tableau_file_holding_code_runs_nothing(tmp_path, monkeypatch, text):
 
 
 def test_the_audit_cli_refuses_a_code_tableau_in_one_line(tmp_path, monkeypatch, capsys):
-    from integrators.cli import main
+    from integrators.service.cli import main
     monkeypatch.chdir(tmp_path)
     f = tmp_path / "evil.toml"
     f.write_text('a = [["__import__(\'os\').system(\'touch PWNED\')"]]\nb = [1]\nc = [0.5]\n')
@@ -130,9 +130,9 @@ def test_system_from_reads_strings_with_the_restricted_parser(tmp_path, monkeypa
 
 # -- the service: statuses, exit codes, batch safety ---------------------------------------------------
 
-from integrators import driver  # noqa: E402
-from integrators.cli import main as cli_main  # noqa: E402
-from integrators.scene import SceneError, load_scene, parse_scene  # noqa: E402
+from integrators.service import driver  # noqa: E402
+from integrators.service.cli import main as cli_main  # noqa: E402
+from integrators.service.scene import SceneError, load_scene, parse_scene  # noqa: E402
 
 POINTS = Path(__file__).parent
 BIN = Path(sys.executable).parent
@@ -243,7 +243,7 @@ def test_the_new_systems_scenes_run_ok_through_the_driver(name, tmp_path):
     sc = dataclasses.replace(sc, steps=40, output_every=20)
     summaries = driver.run(sc, tmp_path / "x.h5", progress=False)
     assert {s.status for s in summaries} == {"ok"}
-    run = integrators.read_run(tmp_path / "x.h5")
+    run = integrators.service.read_run(tmp_path / "x.h5")
     for pair in run.pairs:
         kept = ("canonical" if pair.endswith("-none") else "corrected" if pair.endswith("-symplectic") else None)
         if kept:
@@ -538,7 +538,7 @@ def test_version_license_citation_and_scene_keys(capsys):
 
 
 def test_plot_shades_exactly_the_under_resolved_outputs():
-    from integrators.plots import _stretches
+    from integrators.service.plots import _stretches
     t = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
     assert _stretches(t, np.array([0, 1, 1, 0, 1], bool)) == [(5.0, 25.0), (35.0, 45.0)]
     assert _stretches(t, np.zeros(5, bool)) == []

@@ -8,10 +8,10 @@ import h5py
 import numpy as np
 import pytest
 
-from integrators import read_run
-from integrators.cli import main as cli_main
-from integrators.output import DamagedFile
-from integrators.scene import SceneError, parse_scene
+from integrators.service import read_run
+from integrators.service.cli import main as cli_main
+from integrators.service.output import DamagedFile
+from integrators.service.scene import SceneError, parse_scene
 
 TABLEAU = '''name = "MyGL2"
 a = [["1/4", "1/4 - sqrt(3)/6"], ["1/4 + sqrt(3)/6", "1/4"]]
@@ -111,7 +111,7 @@ def test_a_system_from_a_python_function(tmp_path, monkeypatch):
     path = tmp_path / "f.toml"
     path.write_text(text)
     monkeypatch.chdir(tmp_path)
-    from integrators.scene import load_scene
+    from integrators.service.scene import load_scene
     sc = load_scene(str(path))
     sy = sc.system()
     assert sy.name == "osc" and sy.H(np.array([1.0, 0.0])) == 1.0      # omega = 2 reached the function

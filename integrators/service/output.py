@@ -45,7 +45,7 @@ import re
 import h5py
 import numpy as np
 
-from .engine import CHECKPOINT_FIELDS
+from ..engine import CHECKPOINT_FIELDS
 
 FORMAT = "poincare/2"
 STATUSES = ("pending", "ok", "under-resolved", "partial", "failed")
@@ -53,8 +53,25 @@ FINISHED = ("ok", "under-resolved", "partial", "failed")
 STATE_FIELDS = CHECKPOINT_FIELDS         # the engine's State defines the checkpoint schema
 
 
-def pair_name(tableau, projection):
+def pair_name(tableau, projection) -> str:
+    """The group name of a (tableau, projection) pair: 'GLRK2-symmetric' (a step map: 'rk4-map')."""
     return f"{tableau}-{projection}"
+
+
+def split_pair_name(name) -> tuple:
+    """(tableau, projection) of a pair's group name (a tableau name may itself contain '-')."""
+    tab, proj = name.rsplit("-", 1)
+    return tab, proj
+
+
+def relative_error(v) -> np.ndarray:
+    """|I(t) − I(0)| / |I(0)| of a series of invariant values; NaN throughout when I(0) is not a
+    finite non-zero number (the one definition of the invariant error: summaries, plots, audit)."""
+    v = np.asarray(v, dtype=float)
+    if v.size == 0 or not np.isfinite(v[0]) or v[0] == 0:
+        return np.full_like(v, np.nan)
+    with np.errstate(all="ignore"):
+        return np.abs(v - v[0]) / abs(v[0])
 
 
 class OutputError(OSError):
@@ -142,25 +159,21 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
         g.attrs["status"] = "pending"
         g.attrs["wall_time"] = 0.0
         _series(g, "t")
-        for inv, present in (("I1", scene.loop is not None), ("I2", scene.surface is not None)):
-            if present:
-                for form in scene.forms:
-                    _series(g, f"{inv}/{form}")
-                _series(g, f"resolution/{inv}")
-                _series(g, f"resolved/{inv}", "u1")
+        for spec, _ in scene.sample_sets:
+            for form in scene.forms:
+                _series(g, f"{spec.invariant}/{form}")
+            _series(g, f"resolution/{spec.invariant}")
+            _series(g, f"resolved/{spec.invariant}", "u1")
         for diag in scene.diagnostics:
             _series(g, f"{diag}_error")
         g.create_dataset("breakdown_time", data=np.full(npoints, np.inf), chunks=True, fletcher32=True)
         g.create_dataset("wall_clock", data=np.zeros(1))
         if scene.store_points:
-            if scene.loop is not None:
-                n, d = scene.loop["points"], state_shapes["q"][0][1]
-                g.create_dataset("points/loop", shape=(0, n, d), maxshape=(None, n, d), dtype="f8", chunks=(1, n, d),
-                                 fletcher32=True)
-            if scene.surface is not None:
-                ns, nt, d = scene.surface["n_sigma"], scene.surface["n_tau"], state_shapes["q"][0][1]
-                g.create_dataset("points/surface", shape=(0, ns, nt, d), maxshape=(None, ns, nt, d), dtype="f8",
-                                 chunks=(1, ns, nt, d), fletcher32=True)
+            d = state_shapes["q"][0][1]
+            for spec, _ in scene.sample_sets:
+                shape = spec.grid + (d,)
+                g.create_dataset(f"points/{spec.name}", shape=(0,) + shape, maxshape=(None,) + shape, dtype="f8",
+                                 chunks=(1,) + shape, fletcher32=True)
         for slot in ("a", "b"):
             c = g.create_group(f"checkpoint/{slot}")
             c.create_dataset("step", data=np.array(-1, dtype=np.int64))
@@ -277,8 +290,7 @@ def pair_summary(g, n_outputs, threshold):
             for form in g[inv]:
                 v = g[inv][form][...]
                 use = ok if not broke else np.isfinite(v)
-                with np.errstate(all="ignore"):
-                    e = np.abs(v - v[0]) / abs(v[0]) if v.size else v
+                e = relative_error(v)
                 errs[f"{inv} {form}"] = float(np.max(e[use])) if use.any() and np.isfinite(e[use]).all() else np.nan
     except OSError as exc:
         raise DamagedFile(f"dataset in '{g.name}' is damaged ({plain_error(exc)})") from None
@@ -306,6 +318,79 @@ def set_status(g, status, unresolved_from):
             del g.attrs[key]
 
 
+def reopen(path, scene):
+    """The file of an interrupted or grown run, open for writing, checked, with the scene now in force."""
+    f = open_for_resume(path)
+    verify(f, path)
+    f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
+    f.attrs["steps"] = scene.steps
+    return f
+
+
+def pair_group(f, name):
+    return f["runs"][name]
+
+
+def wall_clock(g, value=None) -> float:
+    """The pair's accumulated wall time [s] (over resumes); with ``value``, set it."""
+    if value is not None:
+        g["wall_clock"][0] = value
+    return float(g["wall_clock"][0])
+
+
+def restart_pair(f, name, output_every, finished_too=False):
+    """Where a pair starts: None (finished, and ``finished_too`` is False), (0, None) (from the start,
+    rows cleared) or (step, state) of its checkpoint, with the rows after it cleared."""
+    g = f["runs"][name]
+    step, state = read_checkpoint(g)
+    if g.attrs["status"] in FINISHED and not finished_too:
+        return None
+    g.attrs["status"] = "pending"
+    if step is None:
+        truncate(g, 0)
+        return 0, None
+    truncate(g, step // output_every + 1)
+    return step, state
+
+
+def write_output(f, g, step, row, state):
+    """Append one output row, the points' breakdown times and the checkpoint of the full state at
+    ``step`` (stage arrays padded to the file's largest s); refuses, naming the last output
+    written, when the disk cannot hold it."""
+    need = sum(np.asarray(v).nbytes for v in row.values()) + sum(v.nbytes for v in state.values())
+    last = f"{g.name.rsplit('/', 1)[-1]} t = {g['t'][-1]:g}" if g["t"].shape[0] else \
+        f"the pair before {g.name.rsplit('/', 1)[-1]}"
+    ensure_space(f.filename, need, last)
+    append(g, row)
+    g["breakdown_time"][...] = state["breakdown_time"]
+    Y, s_max = state["Y"], g["checkpoint/a/Y"].shape[1]
+    if Y.shape[1] < s_max:
+        state = dict(state, Y=np.concatenate([Y, np.zeros((Y.shape[0], s_max - Y.shape[1], Y.shape[2]))], axis=1))
+    write_checkpoint(f, g, step, state)
+
+
+def close_pair(g, n_outputs, threshold):
+    """The pair's status from its rows (see :func:`pair_summary`), written."""
+    status, _, _, unresolved = pair_summary(g, n_outputs, threshold)
+    set_status(g, status, unresolved)
+
+
+def finish(path, names, n_outputs) -> list:
+    """Write each pair's final status and wall_time; [(name, status, breakdowns, errors, wall time,
+    unresolved)] as :func:`pair_summary` gives them."""
+    out = []
+    with h5py.File(path, "r+") as f:
+        threshold = float(f.attrs.get("resolution_threshold", np.inf))
+        for name in names:
+            g = f["runs"][name]
+            status, broke, errs, unresolved = pair_summary(g, n_outputs, threshold)
+            set_status(g, status, unresolved)
+            wall = float(g["wall_clock"][0])
+            g.attrs["wall_time"] = wall
+            out.append((name, status, broke, errs, wall, unresolved))
+    return out
+
+
 @dataclasses.dataclass
 class PairRun:
     """One (tableau, projection) pair of a run file, read into arrays (see :func:`read_run`).
@@ -314,7 +399,8 @@ class PairRun:
     ``resolution``/``resolved`` : {'I1'|'I2': (n,)} the sets' monitors and 0/1 flags;
     ``errors`` : {'energy'|'momentum'|'constraint': (n,)} max over live points; ``breakdown_time`` :
     (npoints,) inf where a point never broke down; ``points`` : {'loop'|'surface': array} when the scene
-    stored them; ``status``, ``wall_time``.
+    stored them; ``status``, ``wall_time``; ``under_resolved_from`` : {'I1'|'I2': first t} of a set
+    that was under-resolved.
     """
 
     name: str
@@ -328,11 +414,11 @@ class PairRun:
     errors: dict
     breakdown_time: np.ndarray
     points: dict
+    under_resolved_from: dict = dataclasses.field(default_factory=dict)
 
     def relative_error(self, inv="I1", form="noncanonical"):
-        """|I(t) − I(0)| / |I(0)| of one invariant and form."""
-        v = (self.I1 if inv == "I1" else self.I2)[form]
-        return np.abs(v - v[0]) / abs(v[0])
+        """|I(t) − I(0)| / |I(0)| of one invariant and form (:func:`relative_error`)."""
+        return relative_error((self.I1 if inv == "I1" else self.I2)[form])
 
 
 @dataclasses.dataclass
@@ -350,6 +436,31 @@ class Run:
     def __getitem__(self, name):
         return self.pairs[name]
 
+    def grid(self) -> tuple:
+        """(tableaus, projections) in the scene's order (HDF5 lists the groups alphabetically); a
+        user's step maps come last, under the projection 'map'."""
+        try:
+            from .scene import parse_scene
+            sc = parse_scene(self.scene)
+            maps = [t for t, p in sc.pairs if p == "map"]
+            return list(sc.tableaus) + maps, list(sc.projections) + (["map"] if maps else [])
+        except ValueError:                 # the scene no longer parses here (a user file moved): by name
+            tabs, projs = [], []
+            for name in self.pairs:
+                t, p = split_pair_name(name)
+                tabs += [t] if t not in tabs else []
+                projs += [p] if p not in projs else []
+            return tabs, projs
+
+
+def _read(g, name):
+    """A dataset's values; a failed checksum or a missing dataset is a DamagedFile naming it."""
+    try:
+        return g[name][...]
+    except (OSError, KeyError) as exc:
+        raise DamagedFile(f"'{g.file.filename}' is damaged: cannot read {g.name}/{name} "
+                          f"({plain_error(exc)})") from None
+
 
 def read_run(path) -> Run:
     """Read a ``poincare run`` file into arrays (the layout above; h5py underneath).
@@ -365,13 +476,15 @@ def read_run(path) -> Run:
             pairs = {}
             for name, g in f["runs"].items():
                 def sets(key):
-                    return {k: g[key][k][...] for k in g[key]} if key in g else {}
+                    return {k: _read(g, f"{key}/{k}") for k in g[key]} if key in g else {}
                 pairs[name] = PairRun(
                     name=name, status=str(g.attrs.get("status", "pending")),
-                    wall_time=float(g["wall_clock"][0]), t=g["t"][...], I1=sets("I1"), I2=sets("I2"),
+                    wall_time=float(_read(g, "wall_clock")[0]), t=_read(g, "t"), I1=sets("I1"), I2=sets("I2"),
                     resolution=sets("resolution"), resolved=sets("resolved"),
-                    errors={k[:-len("_error")]: g[k][...] for k in g if k.endswith("_error")},
-                    breakdown_time=g["breakdown_time"][...], points=sets("points"))
+                    errors={k[:-len("_error")]: _read(g, k) for k in g if k.endswith("_error")},
+                    breakdown_time=_read(g, "breakdown_time"), points=sets("points"),
+                    under_resolved_from={k.split("/")[1]: float(v) for k, v in g.attrs.items()
+                                         if k.startswith("under_resolved_from/")})
             return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
                        scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
     except DamagedFile:

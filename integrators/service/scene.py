@@ -62,9 +62,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .projections import PROJECTIONS, admission
-from .systems import SYSTEM_NAMES, system as builtin_system
-from .tableaus import tableau as builtin_tableau
+from ..projections import PROJECTIONS, admission
+from ..systems import SYSTEM_NAMES, system as builtin_system
+from ..tableaus import tableau as builtin_tableau
 
 FORMS = ("canonical", "noncanonical", "corrected")
 DIAGNOSTICS = ("energy", "momentum", "constraint")
@@ -76,14 +76,64 @@ class SceneError(ValueError):
 
 
 @dataclasses.dataclass(frozen=True)
+class LoopSpec:
+    """The [loop] of a scene: ``points`` samples of a closed loop, for I₁."""
+
+    points: int
+    shape: str = "guiding_centre"            # a built-in shape (invariants.samples) or module:function
+    params: dict = dataclasses.field(default_factory=dict)
+    name = "loop"
+    invariant = "I1"
+
+    @property
+    def grid(self) -> tuple:
+        """The set's own shape (without the dimension d)."""
+        return (self.points,)
+
+    @property
+    def count(self) -> int:
+        return self.points
+
+    def sample(self, base=None):
+        """(N, d) sample points."""
+        from invariants import samples
+        return samples.loop(_shape(self.shape, "loop.shape", base), self.points, **self.params)
+
+
+@dataclasses.dataclass(frozen=True)
+class SurfaceSpec:
+    """The [surface] of a scene: an n_σ × n_τ Chebyshev grid on a surface, for I₂."""
+
+    n_sigma: int
+    n_tau: int
+    shape: str = "guiding_centre"
+    params: dict = dataclasses.field(default_factory=dict)
+    name = "surface"
+    invariant = "I2"
+
+    @property
+    def grid(self) -> tuple:
+        return (self.n_sigma, self.n_tau)
+
+    @property
+    def count(self) -> int:
+        return self.n_sigma * self.n_tau
+
+    def sample(self, base=None):
+        """(n_σ, n_τ, d) sample points."""
+        from invariants import samples
+        return samples.surface(_shape(self.shape, "surface.shape", base), self.n_sigma, self.n_tau, **self.params)
+
+
+@dataclasses.dataclass(frozen=True)
 class Scene:
     """A validated scene (immutable).  ``text`` is the TOML it came from."""
 
     name: str
     system_name: str
     system_params: dict
-    loop: dict | None
-    surface: dict | None
+    loop: LoopSpec | None
+    surface: SurfaceSpec | None
     tableaus: tuple
     projections: tuple
     h: float
@@ -131,25 +181,37 @@ class Scene:
     def tableau(self, label):
         """The Tableau of a run.tableaus entry (by its pair label)."""
         if label in self.tableau_files:
-            from .tableaus import tableau_from_file
+            from ..tableaus import tableau_from_file
             return tableau_from_file(self.tableau_files[label])
         return builtin_tableau(label)
 
     def loop_points(self):
         """(N, d) loop sample points or None."""
-        if self.loop is None:
-            return None
-        from invariants import samples
-        shape = _shape(self.loop["shape"], "loop.shape", self.base)
-        return samples.loop(shape, self.loop["points"], **self.loop.get("params", {}))
+        return None if self.loop is None else self.loop.sample(self.base)
 
     def surface_points(self):
         """(n_σ, n_τ, d) surface sample points or None."""
-        if self.surface is None:
-            return None
-        from invariants import samples
-        shape = _shape(self.surface["shape"], "surface.shape", self.base)
-        return samples.surface(shape, self.surface["n_sigma"], self.surface["n_tau"], **self.surface.get("params", {}))
+        return None if self.surface is None else self.surface.sample(self.base)
+
+    @property
+    def sample_sets(self) -> list:
+        """[(spec, slice)]: the loop, then the surface, with the rows they occupy in every points array
+        of a run (the surface row by row)."""
+        out, lo = [], 0
+        for spec in (self.loop, self.surface):
+            if spec is not None:
+                out.append((spec, slice(lo, lo + spec.count)))
+                lo += spec.count
+        return out
+
+    @property
+    def n_points(self) -> int:
+        return sum(spec.count for spec, _ in self.sample_sets)
+
+    def points(self, system=None):
+        """(n, d) every sample point of the scene, in the order of :attr:`sample_sets`."""
+        system = system or self.system()
+        return np.concatenate([spec.sample(self.base).reshape(-1, system.d) for spec, _ in self.sample_sets])
 
 
 def _shape(spec, key, base=None):
@@ -249,21 +311,21 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     system = _make_system(spec or {"name": sysd["name"]}, params, base)
     if "loop" not in data and "surface" not in data:
         raise SceneError("the scene needs a [loop] or a [surface] of sample points")
-    loop = dict(data["loop"]) if "loop" in data else None
-    surface = dict(data["surface"]) if "surface" in data else None
-    if loop is not None:
-        loop.setdefault("shape", "guiding_centre")
-        if "points" not in loop:
+    loop = surface = None
+    if "loop" in data:
+        if "points" not in data["loop"]:
             raise SceneError("missing key 'loop.points'")
-        if loop["points"] < 3:
-            raise SceneError(f"loop.points must be at least 3, got {loop['points']}")
-    if surface is not None:
-        surface.setdefault("shape", "guiding_centre")
+        loop = LoopSpec(**data["loop"])
+        if loop.points < 3:
+            raise SceneError(f"loop.points must be at least 3, got {loop.points}")
+    if "surface" in data:
         for k in ("n_sigma", "n_tau"):
-            if k not in surface:
+            if k not in data["surface"]:
                 raise SceneError(f"missing key 'surface.{k}'")
-            if surface[k] < 2:
-                raise SceneError(f"surface.{k} must be at least 2, got {surface[k]}")
+        surface = SurfaceSpec(**data["surface"])
+        for k in ("n_sigma", "n_tau"):
+            if getattr(surface, k) < 2:
+                raise SceneError(f"surface.{k} must be at least 2, got {getattr(surface, k)}")
     maps = tuple(run.get("step_maps", ()))
     for key in ("h", "steps") + (() if maps else ("tableaus", "projections")):
         if key not in run:
@@ -320,7 +382,7 @@ def _make_system(spec, params, base):
     """A System from a scene's [system] table: built-in by name, from ϑ and H, or a user function."""
     if "function" in spec:
         from .plugins import load_callable
-        from .systems import System
+        from ..systems import System
         try:
             fn = load_callable(spec["function"], "system", base)
         except ValueError as exc:
@@ -344,7 +406,7 @@ def _system_from_table(spec, params):
     """ϑ and H (and optionally a symmetry or momentum, and a domain) from the scene, through the
     restricted parser (integrators.expressions): nothing in the file is ever executed."""
     import sympy
-    from .systems import system_from
+    from ..systems import system_from
     coords = spec["coordinates"]
     if not coords or not all(isinstance(c, str) and c.isidentifier() for c in coords):
         raise SceneError(f"system.coordinates must be a list of names, got {coords!r}")
@@ -378,7 +440,7 @@ def _system_from_table(spec, params):
 
 
 def _tableau_file(path):
-    from .tableaus import tableau_from_file
+    from ..tableaus import tableau_from_file
     try:
         return tableau_from_file(path)
     except ValueError as exc:
@@ -419,17 +481,16 @@ def _tableaus(entries, base):
 
 
 def _check_points(scene, system):
-    for what, spec, pts in (("loop", scene.loop, scene.loop_points), ("surface", scene.surface, scene.surface_points)):
-        if spec is None:
-            continue
+    for spec, _ in scene.sample_sets:
+        what = spec.name
         try:
-            q = np.asarray(pts(), dtype=float)
+            q = np.asarray(spec.sample(scene.base), dtype=float)
         except SceneError:
             raise
         except Exception as exc:      # a user shape function may raise anything: one line naming it
-            who = f"{what}.shape '{spec['shape']}'" if ":" in spec["shape"] else what
+            who = f"{what}.shape '{spec.shape}'" if ":" in spec.shape else what
             raise SceneError(f"{who} failed: {type(exc).__name__}: {exc}") from None
-        want = (spec["points"], system.d) if what == "loop" else (spec["n_sigma"], spec["n_tau"], system.d)
+        want = spec.grid + (system.d,)
         if q.shape[-1:] == (system.d,) and q.shape != want:
             raise SceneError(f"{what}: the shape gives points of shape {q.shape}, the scene needs {want}")
         q = q.reshape(-1, q.shape[-1])

@@ -101,8 +101,9 @@ def _print_summary(summaries, out):
 
 
 def cmd_run(args) -> int:
-    from . import __version__
-    from .driver import communicator, run
+    from .. import __version__
+    from .driver import run
+    from .ranks import communicator
     from .scene import load_scene
     comm = communicator()
     scene = load_scene(args.scene)
@@ -113,16 +114,14 @@ def cmd_run(args) -> int:
         scene = scene.with_steps(args.steps)
     if args.threads is not None and args.threads < 1:
         raise ValueError(f"--threads must be a positive integer, got {args.threads}")
-    from .driver import default_threads
+    from .ranks import default_threads
     threads = args.threads or default_threads(comm)
     if comm.rank == 0:
-        npts = (scene.loop["points"] if scene.loop else 0) + (
-            scene.surface["n_sigma"] * scene.surface["n_tau"] if scene.surface else 0)
-        print(f"scene '{scene.name}': {scene.system_name}, {npts} points, {len(scene.pairs)} pairs, "
+        print(f"scene '{scene.name}': {scene.system_name}, {scene.n_points} points, {len(scene.pairs)} pairs, "
               f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
               f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
               flush=True)
-        from .engine import kernel_cached
+        from ..engine import kernel_cached
         if not kernel_cached():
             print("compiling the step engine (once per machine, about 40 s on 2 cores; the first pair's wall "
                   "time below includes it) ...", flush=True)
@@ -137,7 +136,7 @@ def cmd_run(args) -> int:
 
 def cmd_audit(args) -> int:
     import json
-    from . import audit
+    from .. import audit
     from .scene import load_scene
     scene = load_scene(args.scene)
     if args.steps is not None:
@@ -176,8 +175,7 @@ def cmd_scenes(args) -> int:
         return EXIT_OK
     for name, path in builtin_scenes().items():
         s = load_scene(name)
-        npts = (s.loop["points"] if s.loop else 0) + (s.surface["n_sigma"] * s.surface["n_tau"] if s.surface else 0)
-        print(f"{name:24s} {s.system_name:26s} {npts:6d} points  {len(s.pairs):2d} pairs  h = {s.h:<5g} "
+        print(f"{name:24s} {s.system_name:26s} {s.n_points:6d} points  {len(s.pairs):2d} pairs  h = {s.h:<5g} "
               f"steps = {s.steps:<5d} {path}")
     print("(every scene key: poincare scenes --keys)")
     return EXIT_OK
@@ -204,7 +202,7 @@ def cmd_list(args) -> int:
 def build_parser():
     ap = argparse.ArgumentParser(prog="poincare",
                                  description="Poincaré integral invariant diagnostics of projected variational integrators.")
-    from . import __version__
+    from .. import __version__
     ap.add_argument("--version", action="version", version=f"poincare {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scene (a built-in name or a TOML file; default: the 'default' scene)",
@@ -299,8 +297,8 @@ def main(argv=None) -> int:
     finally:
         for signum, old_handler in previous.items():
             signal.signal(signum, old_handler)
-        if "integrators.driver" in sys.modules:
-            sys.modules["integrators.driver"].STOP.clear()
+        if "integrators.service.driver" in sys.modules:
+            sys.modules["integrators.service.driver"].STOP.clear()
 
 
 if __name__ == "__main__":

@@ -1,0 +1,88 @@
+"""Invariant drift of a candidate over a scene's run, and its verdict (see :mod:`integrators.audit`)."""
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from invariants.forms import UNDER_RESOLVED as RESOLVED   # the one resolution threshold (invariants.forms)
+from .candidates import Candidate, _call
+
+ROUNDOFF = 1e-11        # max relative invariant error still called round-off
+DRIFT_RATIO = 2.0       # last-quarter mean / first-quarter max above which an error drifts
+
+
+def drift_verdict(t, err, broke, resolution=0.0):
+    """(max error, drift rate, verdict) of one error series e(t); see the module doc.
+
+    resolution : the largest resolution monitor of the sample set over the run; above
+    RESOLVED the error may be sampling error rather than the integrator's.
+    """
+    t, err = np.asarray(t, float), np.asarray(err, float)
+    if broke:
+        return float(np.nanmax(err, initial=0.0)) if np.isfinite(err).any() else math.nan, math.nan, "broke down"
+    emax = float(np.max(err))
+    rate = float(np.polyfit(t - t[0], err, 1)[0]) if t.size > 1 else math.nan
+    if emax <= ROUNDOFF:
+        return emax, rate, "round-off"
+    if resolution > RESOLVED:
+        return emax, rate, "under-resolved"
+    k = max(1, (t.size - 1) // 4)
+    first = np.max(err[: k + 1])
+    last = np.mean(err[-k:])
+    return emax, rate, ("drifting" if last > DRIFT_RATIO * first else "bounded")
+
+
+def run_drift(cand: Candidate, scene, progress=None):
+    """Advance the scene's samples with the candidate; returns t, {'I1/form': e(t)}, breakdown step."""
+    from ..service.diagnostics import Diagnostics
+    from ..service.output import relative_error
+    system = scene.system()
+    q0 = scene.points(system)
+    h = scene.h
+    diag = Diagnostics(scene, system, q0)
+    q, p, lam = q0.copy(), system.theta(q0), np.zeros_like(q0)
+    live = np.ones(q0.shape[0], dtype=bool)
+    rows, first_break = [diag.row(0.0, q, p, lam, live)], None
+    if cand.kind == "pair":           # the compiled engine's time loop, as a batch run takes it
+        from ..engine import Engine, march
+        engine = Engine(system, cand.tableau, cand.projection, h)
+        state = engine.state(q0, p, lam)
+
+        def on_output(k):
+            rows.append(diag.row(k * h, state.q, state.p, state.Lam / h, state.live))
+
+        march(engine, state, 0, scene.steps, scene.output_every, on_output, progress)
+        broke = np.isfinite(state.breakdown_time)
+        if broke.any():
+            first_break = int(round(float(np.min(state.breakdown_time[broke])) / h))
+    else:                             # a user's step map, called on the live points
+        for k in range(1, scene.steps + 1):
+            if live.any():
+                with np.errstate(all="ignore"):
+                    try:
+                        q1, p1, l1 = _call(cand.step, q[live], p[live], lam[live], h, system)
+                    except Exception as exc:     # the user's map raised: every point stops here
+                        print(f"audit: {cand.name} raised {type(exc).__name__}: {exc} at step {k}", file=sys.stderr)
+                        q1 = np.full_like(q[live], np.nan)
+                        p1, l1 = q1, q1
+                good = np.all(np.isfinite(q1) & np.isfinite(p1) & np.isfinite(l1), axis=1)
+                good &= system.in_domain(np.where(np.isfinite(q1), q1, 0.0))
+                idx = np.flatnonzero(live)
+                q[idx[good]], p[idx[good]], lam[idx[good]] = q1[good], p1[good], l1[good]
+                live[idx[~good]] = False
+            if first_break is None and not live.all():
+                first_break = k
+            if k % scene.output_every == 0:
+                rows.append(diag.row(k * h, q, p, lam, live))
+            if progress:
+                progress(k)
+    t = np.array([r["t"] for r in rows])
+    resolution = {key[len("resolution/"):]: float(np.nanmax([r[key] for r in rows]))
+                  for key in rows[0] if key.startswith("resolution/")}
+    series = {}
+    for key in rows[0]:
+        if key.startswith("I1/") or key.startswith("I2/"):
+            series[key] = relative_error([r[key] for r in rows])
+    return t, series, first_break, resolution

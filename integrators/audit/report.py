@@ -1,0 +1,138 @@
+"""The audit of a list of candidates on a scene: both measurements, the text report and the plots."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .defect import DEFECT_FLOOR, defect_study
+from .drift import DRIFT_RATIO, RESOLVED, ROUNDOFF, drift_verdict, run_drift
+
+
+def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method="auto", progress=None,
+          drift=True, defect=True):
+    """Run both measurements (or the one asked for) for every candidate and reference.
+
+    Returns the JSON-able report (see :func:`text_report` for its reading).
+    """
+    system = scene.system()
+    pts = scene.loop_points() if scene.loop is not None else scene.surface_points().reshape(-1, system.d)
+    sel = np.linspace(0, pts.shape[0], defect_points, endpoint=False).astype(int)
+    qd = pts[sel]
+    report = {"scene": scene.name, "system": scene.system_name, "h": scene.h, "steps": scene.steps,
+              "T": scene.h * scene.steps, "thresholds": {"roundoff": ROUNDOFF, "drift_ratio": DRIFT_RATIO, "resolved": RESOLVED,
+                                                         "defect_floor": DEFECT_FLOOR},
+              "defect_points": qd.tolist(), "candidates": []}
+    for cand, role in [(c, "candidate") for c in candidates] + [(c, "reference") for c in references]:
+        entry = {"name": cand.name, "role": role, "kind": cand.kind, "breakdown_step": None, "drift": {},
+                 "t": [], "errors": {}, "defect": {}, "jacobian": None}
+        if drift:
+            if progress:
+                progress(f"{cand.name}: invariant drift over {scene.steps} steps")
+            t, series, broke, resolution = run_drift(cand, scene)
+            for key, err in series.items():
+                res = resolution.get(key.split("/")[0], 0.0)
+                emax, rate, verdict = drift_verdict(t, err, broke is not None, res)
+                entry["drift"][key] = {"max_error": emax, "drift_rate": rate, "verdict": verdict, "resolution": res}
+            entry.update(breakdown_step=broke, t=t.tolist(), errors={k: v.tolist() for k, v in series.items()})
+        if defect:
+            if progress:
+                progress(f"{cand.name}: one-step defects at {len(qd)} points, {levels} step sizes")
+            try:
+                entry["defect"], entry["jacobian"] = defect_study(cand.step, system, qd, scene.h, levels, method,
+                                                                  cand.reads)
+            except Exception as exc:      # the user's map raised: a verdict, not a traceback
+                why = f"step failed ({cand.name} raised {type(exc).__name__}: {exc})"
+                entry["defect"] = {form: {"h": [scene.h * 2.0 ** -k for k in range(levels)], "defect": None,
+                                          "order": None, "verdict": why}
+                                   for form in ("canonical", "noncanonical", "corrected")}
+                entry["jacobian"] = "none (the map raised)"
+        report["candidates"].append(entry)
+    return report
+
+
+def _fmt(x, spec=".1e"):
+    if x is None:
+        return "—"
+    if isinstance(x, float) and not math.isfinite(x):
+        return "nan"
+    return format(x, spec)
+
+
+def text_report(report) -> str:
+    """The human-readable report."""
+    lines = [f"Symplecticity audit on scene '{report['scene']}' ({report['system']}, h = {report['h']:g}, "
+             f"{report['steps']} steps, T = {report['T']:g})",
+             f"thresholds: round-off ≤ {ROUNDOFF:g}; drifting when last-quarter mean > {DRIFT_RATIO:g} × "
+             f"first-quarter max; defect floor {DEFECT_FLOOR['complex step']:g} (complex step), "
+             f"{DEFECT_FLOOR['central differences']:g} (central differences)", "",
+             "Invariant drift: max |I(t) − I(0)|/|I(0)|, drift rate [1/time], resolution monitor, verdict"]
+    for c in report["candidates"]:
+        head = f"  {c['name']} ({c['role']})" + (f" — a point broke down at step {c['breakdown_step']}"
+                                                  if c["breakdown_step"] else "")
+        lines.append(head)
+        for key, r in c["drift"].items():
+            lines.append(f"    {key:18s} {_fmt(r['max_error']):>9s} {_fmt(r['drift_rate'], '+.1e'):>9s} "
+                         f"{_fmt(r['resolution']):>9s}  {r['verdict']}")
+    lines += ["", "One-step symplecticity defect (relative) for h, h/2, …, fitted order in h, verdict"]
+    for c in report["candidates"]:
+        lines.append(f"  {c['name']} ({c['role']}, Jacobian by {c['jacobian']})")
+        for form, r in c["defect"].items():
+            vals = " ".join(f"{_fmt(v):>8s}" for v in r["defect"]) if r["defect"] else ""
+            order = f"order {r['order']:.2f}" if r["order"] is not None else ""
+            lines.append(f"    {form:13s} {vals:45s} {order:11s} {r['verdict']}")
+    return "\n".join(lines)
+
+
+def plot_report(report, directory) -> list[Path]:
+    """Two PNGs: invariant errors against time, defects against h."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    cands = report["candidates"]
+    colour = {c["name"]: f"C{k % 10}" for k, c in enumerate(cands)}     # one colour per candidate throughout
+    style = {c["name"]: "-" if c["role"] == "candidate" else "--" for c in cands}
+    forms = ("canonical", "noncanonical", "corrected")
+    invs = sorted({k.split("/")[0] for c in cands for k in c["errors"]})
+    fig, axes = plt.subplots(max(len(invs), 1), 3, figsize=(12, 3.2 * max(len(invs), 1)), squeeze=False)
+    for row, inv in zip(axes, invs):
+        for ax, form in zip(row, forms):
+            key = f"{inv}/{form}"
+            for c in cands:
+                if key in c["errors"]:
+                    e = np.maximum(np.array(c["errors"][key], float), 1e-17)
+                    ax.semilogy(c["t"], e, style[c["name"]], color=colour[c["name"]], label=c["name"])
+            ax.axhline(ROUNDOFF, color="grey", lw=0.5)
+            ax.set_title(key, fontsize=9)
+            ax.set_xlabel("t")
+        row[0].set_ylabel("|I(t) − I(0)| / |I(0)|")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8)
+    fig.suptitle(f"invariant errors, scene {report['scene']} (grey: round-off threshold)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    p1 = directory / "audit_invariants.png"
+    fig.savefig(p1, dpi=80)
+    plt.close(fig)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.8), squeeze=False)
+    for ax, form in zip(axes[0], forms):
+        for c in cands:
+            r = c["defect"].get(form)
+            if r and r["defect"]:
+                ax.loglog(np.abs(r["h"]), np.maximum(r["defect"], 1e-18), "o" + style[c["name"]],
+                          color=colour[c["name"]], label=c["name"], ms=3)
+        ax.axhline(DEFECT_FLOOR["complex step"], color="grey", lw=0.5)
+        ax.set_title(f"{form} defect", fontsize=9)
+        ax.set_xlabel("h")
+    axes[0][0].set_ylabel("relative defect")
+    handles = [plt.Line2D([], [], color=colour[c["name"]], ls=style[c["name"]], marker="o", ms=3) for c in cands]
+    fig.legend(handles, [c["name"] for c in cands], loc="lower center", ncol=min(len(cands), 4), fontsize=8)
+    fig.suptitle("one-step symplecticity defect (grey: complex-step floor; absent: the map does not read "
+                 "the form's inputs)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    p2 = directory / "audit_defects.png"
+    fig.savefig(p2, dpi=80)
+    plt.close(fig)
+    return [p1, p2]

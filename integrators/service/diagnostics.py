@@ -1,0 +1,121 @@
+"""What a run records at each output time, split so that the ranks share the work.
+
+Two kinds of work:
+
+* **per point**: the energy, momentum and constraint errors.  Each rank takes the largest over
+  the live points it owns (:meth:`Diagnostics.point_errors`); the row holds the largest over the
+  ranks.  A maximum does not depend on how the points were split, so the row is bitwise the same
+  for any rank count.
+* **per sample set and form**: I₁ of the loop and I₂ of the surface in each of the scene's forms
+  (:meth:`Diagnostics.invariant`).  These need every point of the set, so each (set, form) is a
+  *task* given to one rank (:func:`assign`); the set's points are gathered to the ranks that hold
+  one of its tasks, and only the values come back to rank 0.  A task is the same function call on
+  the same points whichever rank runs it.
+
+:meth:`Diagnostics.row` does both on one process (the audit, a one-rank run);
+:meth:`Diagnostics.combine` turns the pieces from the ranks into the same row.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# relative cost of one form per sample point, measured on guiding_centre_symmetric (loop of 2,000,
+# surface of 100 × 100; docs/benchmarks.md): only the ratios matter, for the assignment of tasks
+COST_PER_POINT = {("I1", "canonical"): 0.25, ("I1", "noncanonical"): 0.20, ("I1", "corrected"): 0.63,
+                  ("I2", "canonical"): 1.85, ("I2", "noncanonical"): 1.32, ("I2", "corrected"): 3.68}
+
+
+def assign(scene, size, busy=None) -> dict:
+    """{(invariant, form): rank}: every task of the scene's sets given to a rank, the longest first
+    to the least loaded (``busy[r]``: work a rank already has, in the same units; rank 0 writes the
+    file).  Deterministic: the same scene and size give the same assignment."""
+    load = np.zeros(size) if busy is None else np.array(busy, dtype=float)
+    tasks = [(COST_PER_POINT[(spec.invariant, form)] * spec.count, spec.invariant, form)
+             for spec, _ in scene.sample_sets for form in scene.forms]
+    out = {}
+    for cost, inv, form in sorted(tasks, key=lambda t: (-t[0], t[1], t[2])):
+        r = int(np.argmin(load))
+        out[(inv, form)] = r
+        load[r] += cost
+    return out
+
+
+class Diagnostics:
+    """The output-time record of a scene's points.
+
+    q0 : the initial points of rows [lo, hi) of the run (the block a rank owns; all of them on one
+    process): the reference energy and momentum of each point.
+    """
+
+    def __init__(self, scene, system, q0):
+        self.scene, self.system = scene, system
+        self.H0 = system.H(q0)
+        self.P0 = system.momentum(q0) if "momentum" in scene.diagnostics else None
+
+    def point_errors(self, q, p, live) -> dict:
+        """{'energy_error': …, …}: the largest error over the live points of this block (0 if none)."""
+        sc, sy = self.scene, self.system
+        out = {}
+        with np.errstate(all="ignore"):
+            if "energy" in sc.diagnostics:
+                out["energy_error"] = float(np.max(np.abs((sy.H(q) - self.H0) / self.H0)[live], initial=0.0))
+            if "momentum" in sc.diagnostics:
+                out["momentum_error"] = float(np.max(np.abs(sy.momentum(q) - self.P0)[live], initial=0.0))
+            if "constraint" in sc.diagnostics:
+                out["constraint_error"] = float(np.max(np.abs(p - sy.theta(q))[live], initial=0.0))
+        return out
+
+    def invariant(self, spec, form, q, p, lam, live):
+        """(value, resolution, computed) of one form of one set's invariant; points shaped as the set's grid.
+
+        A set with a broken-down (frozen) point is no longer an advected set: not computed, NaN.
+        Points that are not finite give NaN, not computed, too.
+        """
+        import invariants
+        if not live.all():
+            return np.nan, np.nan, False
+        fn = invariants.first_invariant if spec.invariant == "I1" else invariants.second_invariant
+        with np.errstate(all="ignore"):
+            try:
+                v = fn(q, form, system=self.system, p=p, lam=lam, h=self.scene.h)
+            except ValueError:          # non-finite values
+                return np.nan, np.nan, False
+        return v.value, v.resolution, True
+
+    def combine(self, t, errors, values) -> dict:
+        """The row at time t from the blocks' ``point_errors`` (a list) and the tasks' ``values``
+        ({(invariant, form): (value, resolution, computed, all live)}).
+
+        ``resolution/<set>`` is the largest monitor over the forms (NaN when a point broke down or a
+        value was not finite); ``resolved/<set>`` is 1 when it is at most invariants.UNDER_RESOLVED.
+        """
+        from invariants import UNDER_RESOLVED
+        row = {"t": t}
+        for spec, _ in self.scene.sample_sets:
+            inv = spec.invariant
+            live = all(values[(inv, form)][3] for form in self.scene.forms)
+            res = 0.0 if live else np.nan
+            for form in self.scene.forms:         # in the scene's order: max() keeps a NaN it meets first
+                value, r, computed, _ = values[(inv, form)]
+                row[f"{inv}/{form}"] = value
+                if live:
+                    res = max(res, r) if computed else np.nan
+            row[f"resolution/{inv}"] = res
+            row[f"resolved/{inv}"] = 1 if res <= UNDER_RESOLVED else 0
+        for key in errors[0] if errors else ():
+            row[key] = float(np.max([e[key] for e in errors]))
+        return row
+
+    def set_values(self, spec, forms, q, p, lam, live) -> dict:
+        """{(invariant, form): (value, resolution, computed, all live)} of one set's points (its grid's shape)."""
+        return {(spec.invariant, form): self.invariant(spec, form, q, p, lam, live) + (bool(live.all()),)
+                for form in forms}
+
+    def row(self, t, q, p, lam, live) -> dict:
+        """The whole row of points (n, d) on one process."""
+        values = {}
+        for spec, rows in self.scene.sample_sets:
+            shp = spec.grid + (q.shape[1],)
+            values.update(self.set_values(spec, self.scene.forms, q[rows].reshape(shp), p[rows].reshape(shp),
+                                          lam[rows].reshape(shp), live[rows]))
+        return self.combine(t, [self.point_errors(q, p, live)], values)

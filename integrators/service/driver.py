@@ -1,0 +1,331 @@
+"""The batch-run driver: every (tableau, projection) pair of a scene, distributed over MPI ranks.
+
+The sample points (loop first, then the surface row by row) are split into contiguous
+blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
+advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank advances its block with each pair; at every output
+time rank 0 gathers the points, computes the invariants and diagnostics and appends
+one row to the HDF5 file (see :mod:`integrators.service.output`), plus a checkpoint of the
+full integrator state.  Because a point's trajectory does not depend on its batch,
+the file's numbers are bitwise the same for any number of ranks.  Without mpiexec
+(or without mpi4py) it runs as a single process.
+"""
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import output
+from ..engine import Engine, MapEngine, State, march, set_threads
+from .diagnostics import Diagnostics, assign
+from .ranks import _balance, _split, communicator, default_threads
+
+
+STOP = []      # exceptions left by a signal handler (integrators.service.cli); raised before the next step
+
+
+def _check_stop():
+    if STOP:
+        raise STOP.pop()
+
+
+@dataclasses.dataclass
+class PairSummary:
+    pair: str
+    status: str
+    breakdowns: int
+    max_errors: dict
+    wall_time: float
+    timings: dict = dataclasses.field(default_factory=dict)
+    unresolved_from: dict = dataclasses.field(default_factory=dict)   # {'I1': first t the set was under-resolved}
+
+
+class Progress:
+    """A one-line progress bar with ETA on stderr (rank 0 only; silent when not a terminal unless forced)."""
+
+    def __init__(self, total, enabled):
+        self.total, self.done, self.enabled = total, 0, enabled
+        self.start = time.perf_counter()
+        self.last = 0.0
+
+    def update(self, n, label):
+        self.done += n
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < 0.2 and self.done < self.total:
+            return
+        self.last = now
+        frac = self.done / self.total
+        eta = (now - self.start) * (1 - frac) / frac if frac > 0 else float("nan")
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f}%  {label:<22s} ETA {eta:6.0f} s ")
+        if self.done >= self.total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _concat(parts):
+    return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+
+
+def _check_output(path, resume, force):
+    """One-line reasons why ``path`` cannot be the output, or None."""
+    if resume and force:
+        return "--resume and --force contradict each other: --resume continues the file, --force replaces it"
+    if path.is_dir():
+        return f"output '{path}' is a directory; give a file name, e.g. -o {path / 'run.h5'}"
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        return f"output directory '{parent}' does not exist"
+    if path.exists() and not (resume or force):
+        return f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
+    if resume and not path.exists():
+        return f"cannot resume: '{path}' does not exist"
+    return None
+
+
+def _resume_plan(path, scene):
+    """Check that ``path`` was written by ``scene`` (or by the same scene with fewer steps)."""
+    from .scene import parse_scene, scene_differences
+    text, steps = output.read_scene_text(path)
+    old = parse_scene(text, origin=str(path))
+    if steps is not None:
+        old = dataclasses.replace(old, steps=steps)
+    diff = scene_differences(old, scene)
+    for label, digest in output.read_tableau_digests(path).items():
+        if label in scene.tableau_files and scene.tableau(label).digest != digest:
+            raise ValueError(f"cannot resume '{path}': tableau file '{scene.tableau_files[label]}' ({label}) "
+                             "has other coefficients than the run was started with")
+    if diff == ["run.steps"] and scene.steps > old.steps:
+        return old.steps                      # extend a run to more steps
+    if diff == ["run.steps"]:
+        raise ValueError(f"cannot resume '{path}' with fewer steps ({scene.steps}) than it was run for ({old.steps})")
+    if diff:
+        raise ValueError(f"cannot resume '{path}': the scene differs in {', '.join(diff)} "
+                         "(only run.steps may grow; everything else must match)")
+    return None
+
+
+def run(scene, path, *, resume=False, force=False, comm=None, progress=None, version="0", after_output=None,
+        threads=None):
+    """Run every pair of ``scene`` and write ``path``; returns a list of PairSummary (rank 0) or None.
+
+    threads : threads over points on each rank (default: :func:`default_threads`); the numbers are
+        bitwise the same for any count.
+
+    resume : continue the pairs of an interrupted file, or extend a finished one when only
+        ``run.steps`` grew (the result is bitwise the run of the longer scene).
+    after_output : optional callback(pair, step) on rank 0 after each flushed output (tests use it).
+    """
+    from invariants import UNDER_RESOLVED
+    comm = comm or communicator()
+    rank = comm.rank
+    path = Path(path)
+    set_threads(threads or default_threads(comm))
+    error, grown_from = None, None
+    if rank == 0:
+        error = _check_output(path, resume, force)
+        if error is None and resume:
+            try:
+                grown_from = _resume_plan(path, scene)
+            except ValueError as exc:
+                error = str(exc)
+    error = comm.bcast(error, root=0)
+    if error:
+        raise ValueError(error)
+
+    system = scene.system()
+    q0 = scene.points(system)
+    n = q0.shape[0]
+    offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
+
+    f = None
+    todo = []
+    if rank == 0:
+        try:
+            if resume:
+                f = output.reopen(path, scene)
+            else:
+                max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
+                f = output.create(path, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
+            for tab, proj in scene.pairs:
+                todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
+                                                finished_too=grown_from is not None))
+            f.flush()
+        except (OSError, ValueError) as exc:
+            todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
+                output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
+            if f is not None:
+                _close_quietly(f)
+    todo = comm.bcast(todo if rank == 0 else None, root=0)
+    if isinstance(todo, Exception):
+        raise todo
+
+    timings = {}
+    steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
+    bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
+    try:
+        for (tab_name, proj), job in zip(scene.pairs, todo):
+            if job is None:
+                continue
+            _check_stop()
+            offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed,
+                                       after_output, bar, timings, UNDER_RESOLVED)
+        comm.Barrier()
+    except output.OutputError:
+        if f is not None:
+            _close_quietly(f)
+        raise
+    except (OSError, RuntimeError) as exc:      # h5py raises RuntimeError for some failed writes
+        if f is not None:
+            _close_quietly(f)
+        raise output.OutputError(f"writing '{path}' failed: {output.plain_error(exc)}; every output before "
+                                 "the failure is in the file (free space, then --resume)") from None
+    except BaseException:
+        if f is not None:
+            _close_quietly(f)
+        raise
+    if rank != 0:
+        return None
+    f.close()
+    summaries = finalize(path, scene)
+    for s_ in summaries:
+        s_.timings = timings.get(s_.pair, {})
+    return summaries
+
+
+def _close_quietly(f):
+    try:
+        f.flush()
+    except Exception:
+        pass
+    try:
+        f.close()
+    except Exception:
+        pass
+
+
+def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, after_output, bar, timings,
+              threshold):
+    """Advance one pair from its start (or checkpoint) to scene.steps, writing every output; rank 0
+    writes the pair's status when it finishes.  Returns the next pair's (offload, speed)."""
+    rank, size = comm.rank, comm.size
+    n, h = q0.shape[0], scene.h
+    name = output.pair_name(tab_name, proj)
+    start_step, saved = job
+    if proj == "map":                          # a user's step map (run.step_maps)
+        engine, s_tab = MapEngine(scene.step_map(tab_name), system, h, tab_name), 1
+    else:
+        engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
+    blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
+    lo, hi = blocks[rank]
+    out = _OutputWork(scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size))
+    if saved is None:
+        st = engine.state(q0[lo:hi])
+    else:
+        saved = comm.bcast(saved if rank == 0 else None, root=0)
+        st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
+    g = output.pair_group(f, name) if rank == 0 else None
+    wall0 = output.wall_clock(g) if rank == 0 else 0.0
+    t_start = time.perf_counter()
+    clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
+    if start_step == 0:
+        _output(comm, f, g, out, st, 0, h, after_output, name, clock)
+
+    def on_output(step):
+        if rank == 0:
+            output.wall_clock(g, wall0 + time.perf_counter() - t_start)
+        _output(comm, f, g, out, st, step, h, after_output, name, clock)
+
+    done = [start_step]
+
+    def progress(step):
+        if rank == 0:
+            bar.update(step - done[0], name)
+        done[0] = step
+
+    clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
+                              _check_stop)
+    timings[name] = clock
+    clocks = comm.gather(dict(clock, points=hi - lo), root=0)
+    if rank != 0:
+        return offload, speed
+    clock["per_rank"] = clocks                 # every rank's phases, for the cost model (scripts/scaling.py)
+    stats = [(c["advance"], c["points"], c["invariants"] + c["hdf5"]) for c in clocks]
+    output.wall_clock(g, wall0 + time.perf_counter() - t_start)
+    output.close_pair(g, scene.n_outputs, threshold)
+    f.flush()
+    return _balance(stats)
+
+
+def _unpad(state, s):
+    return dict(state, Y=state["Y"][:, :s])
+
+
+@dataclasses.dataclass
+class _OutputWork:
+    """What one rank does at an output: its block's diagnostics and its invariant tasks."""
+
+    scene: object
+    diagnostics: Diagnostics
+    block: tuple                    # (lo, hi): the rows this rank advances
+    tasks: dict                     # {(invariant, form): rank}, the same on every rank
+
+
+def _output(comm, f, g, out, st, step, h, after_output, name, clock):
+    """One output: per-point errors on every rank, each (set, form) invariant on the rank the task
+    belongs to (the set's points gathered there), then the row, the points and the checkpoint on
+    rank 0, which writes the file."""
+    # every output is a checkpoint: the next step starts from fresh Jacobians on every rank, so
+    # a resumed run (which has no Jacobians to carry) is bitwise the uninterrupted one
+    st.forget_jacobians()
+    rank, scene = comm.rank, out.scene
+    lo, hi = out.block
+    t0 = time.perf_counter()
+    ck = st.checkpoint()
+    mine = (ck["q"], ck["p"], ck["Lam"] / h, ck["live"])
+    errors = out.diagnostics.point_errors(*mine[:2], mine[3])
+    values, wait = {}, 0.0
+    for spec, rows in scene.sample_sets:
+        a, b = max(lo, rows.start), min(hi, rows.stop)
+        part = tuple(x[max(a - lo, 0):max(b - lo, 0)] for x in mine)
+        owners = sorted({r for (inv, _), r in out.tasks.items() if inv == spec.invariant})
+        for owner in owners:
+            w0 = time.perf_counter()
+            parts = comm.gather(part, root=owner)
+            wait += time.perf_counter() - w0
+            if rank == owner:
+                shp = spec.grid + (mine[0].shape[1],)
+                q, p, lam, live = (np.concatenate([x[k] for x in parts]) for k in range(4))
+                forms = [fm for fm in scene.forms if out.tasks[(spec.invariant, fm)] == rank]
+                values.update(out.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp),
+                                                         lam.reshape(shp), live))
+    t1 = time.perf_counter()
+    parts = comm.gather((errors, values, ck), root=0)
+    t2 = time.perf_counter()
+    clock["invariants"] += t1 - t0 - wait
+    clock["gather"] += wait + t2 - t1
+    if rank != 0:
+        return
+    full = _concat([x[2] for x in parts])
+    row = out.diagnostics.combine(step * h, [x[0] for x in parts], {k: v for x in parts for k, v in x[1].items()})
+    t3 = time.perf_counter()
+    clock["invariants"] += t3 - t2
+    if scene.store_points:
+        for spec, rows in scene.sample_sets:
+            row[f"points/{spec.name}"] = full["q"][rows].reshape(spec.grid + (full["q"].shape[1],))
+    output.write_output(f, g, step, row, full)
+    clock["hdf5"] += time.perf_counter() - t3
+    if after_output is not None:
+        after_output(name, step)
+
+
+def finalize(path, scene):
+    """Each pair's status and wall_time attributes, written, and the summaries."""
+    return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved)
+            for name, status, broke, errs, wall, unresolved in
+            output.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]

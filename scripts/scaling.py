@@ -1,0 +1,233 @@
+"""A per-phase cost model of `poincare run`, measured here and used to predict 1 to 1,024 ranks.
+
+    python scripts/scaling.py measure [--steps 1000] [--hybrid]   # ~15 min on 2 cores: docs/figures/scaling.json
+    python scripts/scaling.py predict                 # the model: tables for docs/benchmarks.md and a PNG
+
+measure:
+  A. the paper scene (paper_poincare: loop 2,000, surface 100 × 100, 15 pairs; ``--steps`` steps),
+     on 1 rank × 1 thread, 2 ranks × 1 thread (and with ``--hybrid`` 1 rank × 2 threads): wall time, every
+     rank's phases (advance, gather, invariants, HDF5) and a bitwise comparison of the files;
+  B. the cost of each invariant task (set, form) at the scene's size and at larger sizes (the
+     exponent of its growth), and of the per-point diagnostics;
+  C. the cost of a gather of checkpoint-sized parts between 2 ranks (bytes per second) and of the
+     HDF5 write per byte (from A's HDF5 phase).
+
+predict: per pair, an output interval of k steps costs
+    T = max((N·k·c + Σ_r W_r) / R, max_r W_r) + G(R),
+with c the pair's advance per point-step (A, one thread), W_r rank r's output work (its invariant
+tasks as :func:`integrators.service.diagnostics.assign` gives them, its points' diagnostics, and on
+rank 0 the HDF5 write) and G the gather of the checkpoint to rank 0 (bytes × (R − 1)/R / bandwidth).
+The balance of points against output work is what the driver's split does; the max is a rank whose
+output work alone exceeds an even share.  Validated against A's 1- and 2-rank walls.
+"""
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+import benchmark_service as bs  # noqa: E402
+
+OUT = ROOT / "docs" / "figures" / "scaling.json"
+FORMS = ("canonical", "noncanonical", "corrected")
+PAIRS = dict(tableaus=("GLRK1", "GLRK2", "SRK3"), projections=("none", "standard", "symmetric", "symplectic", "midpoint"))
+
+
+def task_costs(sizes_loop=(2000, 20000, 200000), sizes_surf=(100, 200, 400)):
+    """Seconds of each (set, form) task on guiding_centre_symmetric at several sizes (median of 3)."""
+    import integrators
+    import invariants
+    sy = integrators.system("guiding_centre_symmetric", B0=1.0, mu=0.01)
+    out = []
+    for inv, sizes in (("I1", sizes_loop), ("I2", sizes_surf)):
+        for n in sizes:
+            x = invariants.loop("guiding_centre", n) if inv == "I1" else invariants.surface("guiding_centre", n, n)
+            fn = invariants.first_invariant if inv == "I1" else invariants.second_invariant
+            p = sy.theta(x.reshape(-1, 4)).reshape(x.shape)
+            lam = np.zeros_like(x)
+            for form in FORMS:
+                ts = []
+                for _ in range(3):
+                    t0 = time.perf_counter()
+                    fn(x, form, system=sy, p=p, lam=lam, h=10.0)
+                    ts.append(time.perf_counter() - t0)
+                out.append(dict(set=inv, form=form, points=int(x.size // 4), seconds=float(np.median(ts))))
+                print(out[-1], flush=True)
+    q = invariants.surface("guiding_centre", 300, 300).reshape(-1, 4)
+    t0 = time.perf_counter()
+    for _ in range(5):
+        sy.H(q), sy.momentum(q), sy.theta(q)
+    diag = (time.perf_counter() - t0) / 5 / q.shape[0]
+    return out, diag
+
+
+GATHER_CHILD = """
+import sys, time, numpy as np
+from mpi4py import MPI
+from integrators import State
+comm = MPI.COMM_WORLD
+n = int(sys.argv[1]) // comm.size
+part = {k: np.ones(shape, dtype) for k, (shape, dtype) in State.schema(n, 4, 3).items()}   # a rank's checkpoint
+nbytes = sum(v.nbytes for v in part.values())
+comm.gather(part, root=0)
+t0 = time.perf_counter()
+for _ in range(20):
+    comm.gather(part, root=0)
+dt = (time.perf_counter() - t0) / 20
+if comm.rank == 0:
+    print(nbytes * (comm.size - 1), dt)
+"""
+
+
+def gather_cost(points=12000):
+    exe = bs.shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
+    r = subprocess.run([exe, "-n", "2", sys.executable, "-c", GATHER_CHILD, str(points)], capture_output=True,
+                       text=True, check=True)
+    nbytes, dt = r.stdout.split()
+    return dict(bytes=int(nbytes), seconds=float(dt), bytes_per_second=int(nbytes) / float(dt))
+
+
+def measure(steps, hybrid=False):
+    text = bs.scene_text("p", steps, **PAIRS)
+    res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=steps,
+                        scene=f"paper_poincare cut to {steps} steps", cores=2,
+                        command=f"python scripts/scaling.py measure --steps {steps}" + (" --hybrid" if hybrid else ""))}
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = (("1x1", 1, 1), ("2x1", 2, 1)) + ((("1x2", 1, 2),) if hybrid else ())
+        for label, ranks, threads in runs:
+            res[label] = bs.measure(text, ranks, tmp, out_name=f"{label}.h5", threads=threads)
+            print(label, res[label]["wall"], flush=True)
+        for other in [r[0] for r in runs[1:]]:
+            differ, n = bs.identical_files(Path(tmp) / "1x1.h5", Path(tmp) / f"{other}.h5")
+            res[f"datasets differing 1x1 vs {other}"] = [len(differ), n]
+            print(other, "differ:", len(differ), "of", n, flush=True)
+    res["tasks"], res["diag_per_point"] = task_costs()
+    res["gather"] = gather_cost()
+    OUT.write_text(json.dumps(res, indent=1))
+    print("wrote", OUT)
+
+
+# -- the model -------------------------------------------------------------------------------
+
+def fit_tasks(tasks):
+    """{(set, form): (a, alpha)}: seconds = a · points^alpha, fitted over the measured sizes."""
+    fits = {}
+    for inv in ("I1", "I2"):
+        for form in FORMS:
+            rows = [t for t in tasks if t["set"] == inv and t["form"] == form]
+            x = np.log([t["points"] for t in rows])
+            y = np.log([t["seconds"] for t in rows])
+            alpha, loga = np.polyfit(x, y, 1)
+            fits[(inv, form)] = (float(np.exp(loga)), float(alpha))
+    return fits
+
+
+def lpt(costs, ranks):
+    """Per-rank load of tasks given longest first to the least loaded rank (as diagnostics.assign)."""
+    load = np.zeros(ranks)
+    for c in sorted(costs, reverse=True):
+        load[np.argmin(load)] += c
+    return load
+
+
+def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup):
+    """Predicted wall [s] of the scene on ``ranks`` ranks × 1 thread."""
+    fits, diag, bw, write_per_byte, ck_bytes = (model[k] for k in ("fits", "diag", "bw", "write_per_byte",
+                                                                   "ck_bytes_per_point"))
+    n = n_loop + n_surf
+    costs = [fits[("I1", f)][0] * n_loop ** fits[("I1", f)][1] for f in FORMS] + \
+            [fits[("I2", f)][0] * n_surf ** fits[("I2", f)][1] for f in FORMS]
+    load = lpt(costs, ranks)
+    W = load + diag * n / ranks
+    W[0] += write_per_byte * ck_bytes * n
+    G = ck_bytes * n * (ranks - 1) / ranks / bw
+    outputs = steps // every
+    total = startup
+    for c in pair_costs:
+        interval = max((n * every * c + W.sum()) / ranks, W.max()) + G
+        total += outputs * interval + W.max() + G        # the outputs, plus the one at t = 0
+    return total
+
+
+def build_model(res):
+    one = res["1x1"]
+    steps, every = res["meta"]["steps"], 10
+    n = 12000
+    pair_costs = [v["advance"] / (n * steps) for v in one["pairs"].values()]
+    outputs = len(pair_costs) * (steps // every + 1)
+    from integrators import State
+    ck_bytes = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, 4, 3).values())
+    model = dict(fits=fit_tasks(res["tasks"]), diag=res["diag_per_point"], bw=res["gather"]["bytes_per_second"],
+                 write_per_byte=one["phases"]["hdf5"] / outputs / (ck_bytes * n), ck_bytes_per_point=ck_bytes)
+    # start-up: what the 1-rank run spent outside its phases (imports, code generation, compile cache)
+    ph = one["phases"]
+    startup = one["wall"] - (ph["advance"] + ph["gather"] + ph["invariants"] + ph["hdf5"])
+    return model, pair_costs, startup, steps, every
+
+
+def predict(args):
+    res = json.loads(OUT.read_text())
+    model, pair_costs, startup, steps, every = build_model(res)
+    lines = ["| ranks | measured wall [s] | predicted wall [s] |", "|---:|---:|---:|"]
+    for label, r in (("1x1", 1), ("2x1", 2)):
+        pred = predict_wall(model, r, 2000, 10000, steps, every, pair_costs, startup)
+        lines.append(f"| {r} | {res[label]['wall']:.1f} | {pred:.1f} |")
+    print("\n".join(lines))
+    print()
+    # the paper scene at 1,000 steps, and at 10^6 points (loop 166,000, surface 913 x 913)
+    big = dict(n_loop=166_000, n_surf=913 * 913)
+    lines = ["| ranks | paper scene, 12,000 points: wall [s] | speed-up | 10⁶ points: wall [s] | speed-up | "
+             "largest task share at 10⁶ |", "|---:|---:|---:|---:|---:|---:|"]
+    base_s = predict_wall(model, 1, 2000, 10000, 1000, every, pair_costs, startup)
+    base_b = predict_wall(model, 1, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup)
+    curve = []
+    fits = model["fits"]
+    biggest = max(fits[("I2", f)][0] * big["n_surf"] ** fits[("I2", f)][1] for f in FORMS)
+    for r in (1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024):
+        ws = predict_wall(model, r, 2000, 10000, 1000, every, pair_costs, startup)
+        wb = predict_wall(model, r, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup)
+        share = biggest * (1000 // every + 1) * len(pair_costs) / wb
+        curve.append((r, ws, wb))
+        lines.append(f"| {r} | {ws:,.0f} | {base_s / ws:.1f} | {wb:,.0f} | {base_b / wb:.1f} | {100 * share:.0f} % |")
+    print("\n".join(lines))
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rs = np.array([c[0] for c in curve])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.loglog(rs, curve[0][1] / np.array([c[1] for c in curve]), "o-", label="paper scene (12,000 points)")
+    ax.loglog(rs, curve[0][2] / np.array([c[2] for c in curve]), "s-", label="10⁶ points")
+    ax.loglog(rs, rs, "k:", lw=0.8, label="ideal")
+    ax.plot([1, 2], [1, res["1x1"]["wall"] / res["2x1"]["wall"]], "r*", ms=10, label="measured (cut-down scene)")
+    ax.set_xlabel("ranks (1 thread each)")
+    ax.set_ylabel("predicted speed-up")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", lw=0.3)
+    ax.set_title("strong scaling predicted by the per-phase cost model", fontsize=10)
+    fig.tight_layout()
+    png = ROOT / "docs" / "figures" / "scaling_model.png"
+    fig.savefig(png, dpi=80)
+    print("wrote", png)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("measure", "predict"))
+    ap.add_argument("--steps", type=int, default=1000, help="steps of the paper scene (its own: 1,000)")
+    ap.add_argument("--hybrid", action="store_true", help="also 1 rank x 2 threads")
+    args = ap.parse_args()
+    if args.what == "measure":
+        measure(args.steps, args.hybrid)
+    else:
+        predict(args)
+
+
+if __name__ == "__main__":
+    main()
