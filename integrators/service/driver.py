@@ -289,8 +289,8 @@ def _output(comm, f, g, out, st, step, h, after_output, name, clock):
     ck = st.checkpoint()
     mine = (ck["q"], ck["p"], ck["Lam"] / h, ck["live"])
     errors = out.diagnostics.point_errors(*mine[:2], mine[3])
-    values, wait = {}, 0.0
-    for spec, rows in scene.sample_sets:
+    values, wait, held = {}, 0.0, []
+    for spec, rows in scene.sample_sets:      # every gather first, so that the ranks then work at once
         a, b = max(lo, rows.start), min(hi, rows.stop)
         part = tuple(x[max(a - lo, 0):max(b - lo, 0)] for x in mine)
         owners = sorted({r for (inv, _), r in out.tasks.items() if inv == spec.invariant})
@@ -299,11 +299,13 @@ def _output(comm, f, g, out, st, step, h, after_output, name, clock):
             parts = comm.gather(part, root=owner)
             wait += time.perf_counter() - w0
             if rank == owner:
-                shp = spec.grid + (mine[0].shape[1],)
-                q, p, lam, live = (np.concatenate([x[k] for x in parts]) for k in range(4))
-                forms = [fm for fm in scene.forms if out.tasks[(spec.invariant, fm)] == rank]
-                values.update(out.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp),
-                                                         lam.reshape(shp), live))
+                held.append((spec, parts))
+    for spec, parts in held:
+        shp = spec.grid + (mine[0].shape[1],)
+        q, p, lam, live = (np.concatenate([x[k] for x in parts]) for k in range(4))
+        forms = [fm for fm in scene.forms if out.tasks[(spec.invariant, fm)] == rank]
+        values.update(out.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
+                                                 live))
     t1 = time.perf_counter()
     parts = comm.gather((errors, values, ck), root=0)
     t2 = time.perf_counter()
