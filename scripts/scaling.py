@@ -23,6 +23,7 @@ output work alone exceeds an even share.  Validated against A's 1- and 2-rank wa
 import argparse
 import json
 import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -87,7 +88,7 @@ if comm.rank == 0:
 
 
 def gather_cost(points=12000):
-    exe = bs.shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
+    exe = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
     r = subprocess.run([exe, "-n", "2", sys.executable, "-c", GATHER_CHILD, str(points)], capture_output=True,
                        text=True, check=True)
     nbytes, dt = r.stdout.split()
