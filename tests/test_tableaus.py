@@ -137,3 +137,19 @@ def test_rounded_drops_only_the_corrections():
     q1 = integrators.integrate(sy, [1.0, 1.0], tab, "symmetric", 0.1, steps=100).q[-1]
     q2 = integrators.integrate(sy, [1.0, 1.0], r, "symmetric", 0.1, steps=100).q[-1]
     assert 0 < np.max(np.abs(q1 - q2)) < 1e-13
+
+
+@pytest.mark.parametrize("name", ["GLRK3", "GLRK4", "GLRK5", "GLRK6"])
+def test_the_symplecticity_condition_in_floating_point(name):
+    """eq:vprk_coefficients for the coefficients the step uses, evaluated exactly: the double +
+    correction tableau and Tableau.conjugated() (ā the exact conjugate of the rounded a, Antoñana et
+    al.) satisfy it to 1e-30; rounded to double, or with GeometricIntegrators.jl's ā computed in
+    double, it is off by 1e-18 … 1e-16."""
+    tab = tableau(name)
+    assert tab.float_symplectic_residual < 1e-30
+    assert tab.conjugated().float_symplectic_residual < 1e-30
+    assert 1e-18 < tab.rounded().float_symplectic_residual < 1e-16
+    assert 1e-18 < tab.conjugated(compensated=False).float_symplectic_residual < 1e-16
+    c = tab.conjugated()
+    assert not (c.a_lo.any() or c.b_lo.any()) and np.array_equal(c.a, tab.a)
+    assert 0 < np.max(np.abs(c.abar - tab.abar)) < 1e-16       # a different ā in its last bits
