@@ -136,6 +136,11 @@ def invert_batched(J):
     J : (n, m, m) -> (n, m, m).  Each matrix is inverted on its own (LAPACK per matrix), so the
     result for one point does not depend on the others.
     """
+    if J.dtype == np.longdouble:
+        # LAPACK has no long double.  Newton only needs an approximate inverse: with the
+        # residual in long double it converges to the long-double solution all the same (the
+        # inverse's 1e-16 error slows each iteration's contraction by that factor, no more)
+        return invert_batched(J.astype(np.float64)).astype(np.longdouble)
     try:
         return np.linalg.inv(J)
     except np.linalg.LinAlgError:
@@ -157,7 +162,7 @@ def apply_batched(M, r):
     return np.matmul(M, r[..., None])[..., 0]
 
 
-def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=None, jinv=None, known=None):
+def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, jinv=None, known=None):
     """Solve fun(idx, z)[0] = 0 for every row of z.
 
     Newton's method with the exact Jacobian, kept while it works: the Jacobian is evaluated
@@ -180,11 +185,13 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=None
     jinv : optional (n, nz, nz) inverse Jacobians to start from (e.g. the last step's); it is
            updated in place with every refresh, so the caller can carry it to the next solve
     known : (n,) bool, rows of ``jinv`` that hold a usable inverse (the others start fresh)
-    tol : converged when max |δ|/scale ≤ tol.  For complex z (complex-step derivatives, used by
+    tol : converged when max |δ|/scale ≤ tol (default 4 eps of z's precision: 8.9e-16 in double,
+          4.3e-19 in long double).  For complex z (complex-step derivatives, used by
           the audit, perturbations i·COMPLEX_STEP) the imaginary part, read as a derivative, must
           meet the same test.
     stall : also converged when max |δ|/scale ≤ stall and the update no longer
-            halves (the iteration has reached its round-off floor)
+            halves (the iteration has reached its round-off floor); default 1e-10 in double and
+          the same number of ulps, 2.4e-14, in long double
 
     Returns
     -------
@@ -193,6 +200,9 @@ def newton(fun, z0, scale, *, tol=4 * EPS, stall=1e-10, maxiter=40, refresh=None
     converged : (n,) bool, iterations : (n,) int
     extras : dict of (n, ...) arrays, ``fun``'s extras at that iterate
     """
+    eps = np.finfo(z0.real.dtype).eps
+    tol = 4 * eps if tol is None else tol
+    stall = 1e-10 * (eps / EPS) if stall is None else stall
     if refresh is None:                      # the compiled kernel's policy, so the oracle takes its path
         from integrators.kernel import REFRESH as refresh
     z = z0.copy()
@@ -268,7 +278,7 @@ PROJECTIONS = ('none', 'standard', 'symmetric', 'symplectic', 'midpoint')
 
 def _apply_rows(E, Y):
     """Σ_j E_ij Y[:, j]: E (s, m), Y (n, m, d) -> (n, s, d); explicit loop (batch-independent bits)."""
-    out = np.empty((Y.shape[0], E.shape[0], Y.shape[2]))
+    out = np.empty((Y.shape[0], E.shape[0], Y.shape[2]), dtype=Y.dtype)
     for i in range(E.shape[0]):
         acc = E[i, 0] * Y[:, 0]
         for j in range(1, E.shape[1]):
@@ -289,11 +299,15 @@ class Stepper:
     ``step(q, p, Lam, guess)`` advances n points; see :meth:`step`.
     """
 
-    def __init__(self, system, tableau, projection, h):
+    def __init__(self, system, tableau, projection, h, accept_unconverged=False):
+        """``accept_unconverged``: a step whose Newton iteration has not converged after its last
+        iteration is taken anyway when the iterate is finite (GeometricIntegrators.jl's stopping
+        rule: only a non-finite value ends a run); ``self.unconverged`` counts such steps."""
         why = admission(tableau, projection)
         if why:
             raise ValueError(why)
         self.system, self.tableau, self.projection, self.h = system, tableau, projection, float(h)
+        self.accept_unconverged, self.unconverged = accept_unconverged, 0
         self.sigma = 1.0 if projection == "standard" else float(np.sign(tableau.R_inf))
         self.coupled = projection in ("symmetric", "midpoint")
         self.lobatto = tableau.d is not None
@@ -310,8 +324,8 @@ class Stepper:
     def first_guess(self, q):
         """Stage displacements h·q̇(q_n) at every stage: (n, s, d)."""
         with np.errstate(all="ignore"):
-            try:
-                v = self.system.vector_field(q)
+            try:                             # a guess: double precision is enough
+                v = self.system.vector_field(q.astype(float) if q.dtype == np.longdouble else q).astype(q.dtype)
             except np.linalg.LinAlgError:
                 v = np.zeros_like(q)
         v = np.where(np.isfinite(v), v, 0.0)
@@ -484,6 +498,10 @@ class Stepper:
             out.p = ex1["p"]
             out.inc_q = (sumbY + sig * L1) if proj == "standard" else ((Lam + sumbY) + sig * L1)
             out.inc_p, out.Lam = None, L1
+        if self.accept_unconverged:
+            finite = np.all(np.isfinite(z), axis=1)
+            self.unconverged += int(np.count_nonzero(finite & ~ok))
+            ok = finite
         out.ok = ok
         return out
 
@@ -517,7 +535,7 @@ class State:
         self.Lam = h * lam
         self.q_comp = np.zeros_like(q)
         self.p_comp = np.zeros_like(q)
-        self.Y = np.zeros((n, s, d))              # stage displacements of the last step
+        self.Y = np.zeros((n, s, d), dtype=q.dtype)   # stage displacements of the last step
         self.mu = np.zeros_like(q)
         self.have_history = np.zeros(n, dtype=bool)
         self.live = np.ones(n, dtype=bool)
@@ -548,7 +566,7 @@ def _attempt(stepper, state, idx, guess, mu0, reuse=True):
     sysm = stepper.system
     q = state.q[idx]
     if state.jinv is None or state.jinv.shape[1] != stepper.nz:
-        state.jinv = np.empty((state.q.shape[0], stepper.nz, stepper.nz))
+        state.jinv = np.empty((state.q.shape[0], stepper.nz, stepper.nz), dtype=q.dtype)
         state.have_jinv[:] = False
     known = state.have_jinv[idx] if reuse else np.zeros(idx.size, dtype=bool)
     # while every point is live, Newton refreshes the inverses in place (no gather, no copy back)
