@@ -199,9 +199,19 @@ class State:
     def from_checkpoint(cls, fields, h):
         """A state from the :data:`CHECKPOINT_FIELDS` of a checkpoint (arrays copied)."""
         st = cls(fields["q"], fields["p"], np.zeros_like(fields["q"]), h, fields["Y"].shape[1])
-        for name in CHECKPOINT_FIELDS:
-            setattr(st, name, np.ascontiguousarray(fields[name]).copy())
+        st.load(fields)
         return st
+
+    def load(self, fields):
+        """Become the state of the checkpoint ``fields`` (any number of points; arrays copied), in
+        place: the driver moves points between ranks this way at an output, where every point's next
+        solve starts from a fresh Jacobian anyway, so the run's bits do not change."""
+        for name in CHECKPOINT_FIELDS:
+            setattr(self, name, np.ascontiguousarray(fields[name]).copy())
+        n = self.q.shape[0]
+        self.lu = np.empty((n, 0, 0), self.q.dtype)
+        self.piv = np.empty((n, 0), np.int64)
+        self.have_lu = np.zeros(n, dtype=bool)
 
     @classmethod
     def schema(cls, n, d, s) -> dict:
