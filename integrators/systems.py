@@ -58,6 +58,10 @@ def _compile(exprs, shape, qsyms, params, name):
     printer = _Printer(names)
     lines = [f"def {name}(_qin):"]
     lines.append("    _qin = numpy.asarray(_qin, dtype=numpy.result_type(_qin, numpy.float64))")
+    # parameters in the input's real precision: a long-double call must not multiply them in double
+    # first (for double the same IEEE products, bit for bit)
+    for i, _ in enumerate(params):
+        lines.append(f"    _k{i} = _qin.real.dtype.type(_K{i})")
     lines.append(f"    _out = numpy.zeros(_qin.shape[:-1] + {tuple(shape)!r}, dtype=_qin.dtype)")
     for i, s in enumerate(qsyms):
         lines.append(f"    {names[s]} = _qin[..., {i}]")
@@ -70,7 +74,7 @@ def _compile(exprs, shape, qsyms, params, name):
         lines.append(f"    _out[{key}] = {printer.doprint(e)}")
     lines.append("    return _out")
     src = "\n".join(lines)
-    namespace = {"numpy": np, **{names[k]: float(v) for k, v in params.items()}}
+    namespace = {"numpy": np, **{f"_K{i}": float(v) for i, v in enumerate(params.values())}}
     exec(compile(src, f"<generated {name}>", "exec"), namespace)
     fn = namespace[name]
     fn.source = src
