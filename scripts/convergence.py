@@ -9,6 +9,14 @@ least-squares slope of log error against log h over the last three h before the 
 the quantity's round-off floor (FLOORS: where double-precision round-off of the method takes over).
 
     python scripts/convergence.py            # writes docs/convergence.md and docs/figures/convergence.json
+    python scripts/convergence.py --extended # docs/figures/convergence_extended.json, then docs/convergence.md
+    python scripts/convergence.py --from-json   # docs/convergence.md from the two JSON files
+
+--extended runs every pair again in x87 long double (64-bit significand: round-off 2,000 times below
+double's) on the numpy engine of tests/numpy_engine.py (the compiled engine's oracle, same equations,
+Newton to 4 eps of long double) for h = 2^-1 … 2^-7, with the errors against the same 30-digit
+reference (π as the double the generated code uses) and the energy and momentum evaluated in long
+double; the floors are FLOORS_LD, double's scaled by the ratio of the two eps.
 """
 import json
 import sys
@@ -29,13 +37,22 @@ PROJ = list(integrators.PROJECTIONS)
 # round-off floors (absolute): below them double-precision round-off of the method, not its order,
 # sets the error (|q| ~ 1, |H| ~ 5e-3, |P| ~ 0.2 here; measured where the local orders collapse)
 FLOORS = {"solution": 1e-14, "energy": 2e-15, "momentum": 1e-14}
+HS_LD = HS[:7]
+# the same floors in units of the precision's eps (long double's is 2,048 times smaller)
+FLOORS_LD = {k: float(v * np.finfo(np.longdouble).eps / np.finfo(float).eps) for k, v in FLOORS.items()}
 
 
-def mp_reference(system, q0, T, dps):
-    """q(T) by mpmath's Taylor-series integrator in ``dps`` digits (returned as floats and as strings)."""
+def mp_reference(system, q0, T, dps, pi_as_double=False):
+    """q(T) by mpmath's Taylor-series integrator in ``dps`` digits (returned as floats and as strings).
+
+    pi_as_double: π as the double ``numpy.pi`` the generated code uses (H of the vortices has a 1/(2π)),
+    so that the reference integrates exactly the system a long-double run integrates (the two π
+    part the solutions by 2.5e-17 at T = 2)."""
     import mpmath
     import sympy
     exact = {k: sympy.Rational(float(v)) for k, v in system.params.items()}    # the doubles, exactly
+    if pi_as_double:
+        exact[sympy.pi] = sympy.Rational(float(np.pi))
     th = [t.subs(exact) for t in system.theta_expr]
     H = system.H_expr.subs(exact)
     q = system.q
@@ -119,10 +136,48 @@ def main():
                   f"P {r['order_momentum']:5.2f} (paper {pm})", flush=True)
     out = ROOT / "docs" / "figures"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "convergence.json").write_text(json.dumps(dict(reference=ref_digits, reference_check=check,
+    (out / "convergence.json").write_text(json.dumps(dict(wall_s=round(time.time() - t_start), reference=ref_digits,
+                                                          reference_check=check,
                                                           dop853_error=float(np.max(np.abs(dop - ref))),
                                                           floors=FLOORS, runs=rows), indent=1))
-    write_markdown(rows, time.time() - t_start, check, float(np.max(np.abs(dop - ref))))
+    write_markdown(json.loads((out / "convergence.json").read_text()), time.time() - t_start)
+
+
+def extended():
+    """Every pair in long double on the numpy engine: errors and orders (docs/figures/convergence_extended.json)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import numpy_engine
+    sy = integrators.system("point_vortices")
+    q0 = np.array(sy.defaults["q0"])
+    t_start = time.time()
+    ref_digits = mp_reference(sy, q0, T, 30, pi_as_double=True)[1]
+    ref = np.array([np.longdouble(x) for x in ref_digits])
+    ql = q0.astype(np.longdouble)[None]
+    H0, P0 = sy.H(ql)[0], sy.momentum(ql)[0]
+    rows = []
+    for tab in TABLEAUS:
+        for proj in PROJ:
+            errs = {"solution": [], "energy": [], "momentum": []}
+            for h in HS_LD:
+                st = numpy_engine.Stepper(sy, integrators.tableau(tab), proj, h)
+                S = numpy_engine.State(ql, sy.theta(ql), np.zeros_like(ql), h, st.s)
+                eH = eP = np.longdouble(0)
+                for k in range(1, round(T / h) + 1):
+                    numpy_engine.advance(st, S, k * h)
+                    eH, eP = max(eH, abs(sy.H(S.q)[0] - H0)), max(eP, abs(sy.momentum(S.q)[0] - P0))
+                ok = bool(S.live[0])
+                errs["solution"].append(float(np.max(np.abs(S.q[0] - ref))) if ok else np.nan)
+                errs["energy"].append(float(eH) if ok else np.nan)
+                errs["momentum"].append(float(eP) if ok else np.nan)
+            pe, pm = paper_orders(tab, proj)
+            r = dict(tableau=tab, projection=proj, h=HS_LD, **{f"{k}_error": v for k, v in errs.items()},
+                     **{f"order_{k}": fit(HS_LD, v, FLOORS_LD[k]) for k, v in errs.items()},
+                     paper_energy=pe, paper_momentum=pm)
+            rows.append(r)
+            print(f"{tab:9s} {proj:10s} long double: sol {r['order_solution']:5.2f} H {r['order_energy']:5.2f} "
+                  f"(paper {pe}) P {r['order_momentum']:5.2f} (paper {pm})", flush=True)
+    (ROOT / "docs" / "figures" / "convergence_extended.json").write_text(json.dumps(
+        dict(reference=ref_digits, floors=FLOORS_LD, wall_s=round(time.time() - t_start), runs=rows), indent=1))
 
 
 DISCUSSION = """
@@ -131,24 +186,42 @@ DISCUSSION = """
 Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
 (`python scripts/convergence_plots.py`).
 
-* **No reference floor any more; the floor is now double precision.** The mpmath reference agrees with a
+* **No reference floor any more; the floor was double precision, and long double lowers it 2,048×.** The mpmath reference agrees with a
   36-digit run to the last bit of a double, so every solution error above 1e-14 is the method's (the
   DOP853 reference used before was off by 4.1e-14, which hid GLRK4's order: 7.4–7.5 then, 7.95–8.01
   now). What remains is the round-off of the method itself: the high-order projected methods reach
   1e-14 to 1e-16 within one to three halvings of h = 1/2, so their fits use two or three points at the
-  largest h, where the local order is still falling towards its limit.
+  largest h, where the local order is still falling towards its limit. The long-double columns (the
+  numpy engine, the compiled engine's oracle, on long double arrays; tests/test_engine.py checks that
+  it carries no double round-off) resolve one to three more halvings.
 * **Energy orders of GLRK4 + standard/symmetric/symplectic 8.7–8.8 vs 8.** Local orders 9.4 then 8.1
-  (8.2e-9 → 1.2e-11 → 4.4e-14) before round-off: falling to the paper's 8. Agrees.
-* **Momentum orders above the paper (GLRK2 symmetric 7.4 vs 6, GLRK3 symplectic 9.1 vs 8, GLRK4
-  symplectic 11.9 vs 10, GLRK4 midpoint 6.7 vs 6, LobIIIA4 symmetric/symplectic 7.5/9.3 vs 8,
-  LobIIIB3/IIIB4 symmetric 8.7/9.6 vs 6/8).** The momentum errors start at 1e-10 or below at h = 1/2
-  and reach round-off within two or three halvings; the local orders fall towards the paper's (GLRK2
-  symmetric 8.4 then 6.4; GLRK4 midpoint 7.3, 6.2, 5.9). Nowhere below the paper; whether the
-  asymptotic order is higher than the paper's cannot be decided in double precision on this problem.
-* **GLRK6 with a projection: 10.0–10.2 vs 12, momentum and energy n/a.** The solution error falls from
-  1.6e-10 (h = 1/2) to 1.4e-13 (h = 1/4) and is at round-off from h = 1/8: one slope, pre-asymptotic.
-  The twelfth order needs larger h or quadruple precision (not done). GLRK6 + midpoint 7.1/7.5/9.5 vs 8:
-  the same two-point situation.
+  (8.2e-9 → 1.2e-11 → 4.4e-14) before round-off: falling to the paper's 8; in long double 8.06–8.07
+  (local 9.4, 8.1, 8.0, 8.0). Agrees.
+* **Momentum orders above the paper in double (GLRK2 symmetric 7.4 vs 6, GLRK3 symplectic 9.1 vs 8,
+  GLRK4 symplectic 11.9 vs 10, GLRK4 midpoint 6.7 vs 6, LobIIIA4 symmetric/symplectic 7.5/9.3 vs 8,
+  LobIIIB3/IIIB4 symmetric 8.7/9.6 vs 6/8): pre-asymptotic slopes cut short by round-off; long
+  double settles them.** In double the momentum errors start at 1e-10 or below at h = 1/2 and reach
+  round-off within two or three halvings. In long double the same rows read GLRK2 symmetric 6.25,
+  GLRK3 symplectic 8.27, LobIIIA4 7.97/7.95, LobIIIB3 6.06, GLRK4 midpoint 5.94 (the paper's 6, 8, 8,
+  6, 6). Where the long-double fit still differs by more than 0.5, its local orders fall onto the
+  paper's before the long-double floor: GLRK4 symmetric 10.84, 9.88 (paper 10); GLRK4 symplectic
+  11.87, 10.55 (10); GLRK5 symplectic 11.38, 12.64 (12); LobIIIB4 symmetric 9.64, 8.07, 7.86 (8).
+  **Agree.**
+* **GLRK5 with a projection: momentum n/a in double**; in long double 10.11 (standard, paper 11),
+  12.16 (symmetric, 12), 11.38 (symplectic, 12, local 11.4 then 12.6). The standard projection's
+  10.1 vs 11: local orders 10.1, 10.8, then the floor (1.2e-18): within one order of the paper's,
+  undecided. Energy and solution 9.8–10.4 (10). **Agree, except GLRK5 standard momentum: 10.1–10.8
+  vs 11, undecided.**
+* **GLRK6 with a projection: 10.0–10.2 vs 12 in double, momentum and energy n/a.** In double the
+  solution error falls from 1.6e-10 (h = 1/2) to 1.4e-13 (h = 1/4) and is at round-off from h = 1/8.
+  In long double the next halving is resolved: local orders of the solution 10.0–10.2 then
+  12.2–12.3 (2.9e-17 at h = 1/8), of the energy 13.7–14.0 then 11.8–12.1 (1.0e-19), so the
+  twelfth order of tab:convergence_energy is reached; the three-point fits (11.1–11.2, and 13.7–14.0
+  over two points for the energy) still carry the pre-asymptotic first slope. Momentum: standard
+  13.20 (paper 13) agrees; symplectic 12.62 then 7.9 into the floor (paper 14) and symmetric n/a
+  (1.4e-15 at h = 1/2, 5e-20 at h = 1/4: already at the long-double floor) are not decided: they need
+  larger h or more than 64 bits. GLRK6 + midpoint 7.1/7.5/9.5 in double: 8.01/8.00/8.04 in long
+  double. **Agree, except the GLRK6 symmetric/symplectic momentum: undecided.**
 * **LobIIIA4 and LobIIIB4 midpoint: 4.0 for all three errors vs the paper's 2s − 2 = 6.** Clean straight
   lines of slope 4 over two decades (see the plot): this is a real difference. Our midpoint projection follows the
   R(∞)-signed table (σ = −1 for LobIIIA4); the paper's printed eq:symplectic_midpoint_projection has no σ.
@@ -192,10 +265,18 @@ below. The standard projection of SRK3 therefore has energy order 3, the same as
 """
 
 
-def write_markdown(rows, wall, check, dop):
+def write_markdown(data, wall):
+    """docs/convergence.md from convergence.json's ``data`` and, where it exists, convergence_extended.json."""
+    rows, check, dop = data["runs"], data["reference_check"], data["dop853_error"]
+    wall = data.get("wall_s", wall)
+    ext_path = ROOT / "docs" / "figures" / "convergence_extended.json"
+    ext_data = json.loads(ext_path.read_text()) if ext_path.exists() else {"runs": []}
+    ext = {(r["tableau"], r["projection"]): r for r in ext_data["runs"]}
     lines = ["# Convergence orders on point vortices", "",
              "Produced by `python scripts/convergence.py` (wall time %.0f s, the reference included; raw "
-             "errors in `docs/figures/convergence.json`)." % wall, "",
+             "errors in `docs/figures/convergence.json`)" % wall
+             + (f" and `python scripts/convergence.py --extended` (long double, wall time {ext_data.get('wall_s', 0):.0f} s; "
+               "`docs/figures/convergence_extended.json`)." if ext else "."), "",
              "Setup: point vortices with γ = (0.1, 0.1), q₀ = (1, 0.1, 1, −0.1), T = 2, h = 2⁻¹ … 2⁻⁹. "
              "Reference: mpmath's Taylor integrator in 30 digits on Ω̄ q̇ = ∇H (against 36 digits: "
              + ("identical once rounded to double" if check == 0 else f"{check:.0e}") +
@@ -205,9 +286,13 @@ def write_markdown(rows, wall, check, dop):
              "momentum 1e-14; |H| ≈ 5e-3, |P| ≈ 0.2); n/a where fewer than two h lie above it. Columns: "
              "measured order of the solution error, of the "
              "energy error and of the angular-momentum error; the paper's order (tab:convergence_energy, "
-             "tab:convergence_momentum) in brackets. **bold** marks a difference larger than 0.5.", "",
-             "| tableau | projection | solution | energy [paper] | momentum [paper] |", "|---|---|---|---|---|"]
-
+             "tab:convergence_momentum) in brackets. **bold** marks a difference larger than 0.5."
+             + (" The last three columns are the same orders with the method run in x87 long double "
+                "(round-off 2,048 times smaller; h = 2⁻¹ … 2⁻⁷; the floors scaled by the same factor: 4.9e-18, 9.8e-19, 4.9e-18) on the numpy "
+                "engine, where double's round-off left too few h or a pre-asymptotic slope." if ext else ""), ""]
+    head = "| tableau | projection | solution | energy [paper] | momentum [paper] |"
+    lines += [head + (" long double: solution | energy | momentum |" if ext else ""),
+              "|---|---|---|---|---|" + ("---|---|---|" if ext else "")]
     def cell(x, ref=None):
         if not np.isfinite(x):
             return "n/a (round-off or breakdown)"
@@ -219,13 +304,22 @@ def write_markdown(rows, wall, check, dop):
         return txt
 
     for r in rows:
-        lines.append(f"| {r['tableau']} | {r['projection']} | {cell(r['order_solution'], r['paper_energy'])} | "
-                     f"{cell(r['order_energy'], r['paper_energy'])} | {cell(r['order_momentum'], r['paper_momentum'])} |")
+        line = (f"| {r['tableau']} | {r['projection']} | {cell(r['order_solution'], r['paper_energy'])} | "
+                f"{cell(r['order_energy'], r['paper_energy'])} | {cell(r['order_momentum'], r['paper_momentum'])} |")
+        x = ext.get((r["tableau"], r["projection"]))
+        if ext:
+            line += (" — | — | — |" if x is None else
+                     f" {cell(x['order_solution'], x['paper_energy'])} | {cell(x['order_energy'], x['paper_energy'])} | "
+                     f"{cell(x['order_momentum'], x['paper_momentum'])} |")
+        lines.append(line)
     (ROOT / "docs" / "convergence.md").write_text("\n".join(lines) + "\n" + DISCUSSION)
 
 
 if __name__ == "__main__":
     if "--from-json" in sys.argv:   # rewrite the markdown from the stored raw errors
+        write_markdown(json.loads((ROOT / "docs" / "figures" / "convergence.json").read_text()), float("nan"))
+    elif "--extended" in sys.argv:
+        extended()
         write_markdown(json.loads((ROOT / "docs" / "figures" / "convergence.json").read_text()), float("nan"))
     else:
         sys.exit(main())
