@@ -204,8 +204,8 @@ class State:
 
     def load(self, fields):
         """Become the state of the checkpoint ``fields`` (any number of points; arrays copied), in
-        place: the driver moves points between ranks this way at an output, where every point's next
-        solve starts from a fresh Jacobian anyway, so the run's bits do not change."""
+        place, with no Newton factors: the next solve of every point starts from a fresh Jacobian, as
+        after any output, so a state loaded from a checkpoint steps bitwise as the one saved."""
         for name in CHECKPOINT_FIELDS:
             setattr(self, name, np.ascontiguousarray(fields[name]).copy())
         n = self.q.shape[0]

@@ -1,6 +1,7 @@
 """A per-phase cost model of `poincare run`, measured here and used to predict 1 to 1,024 ranks.
 
-    python scripts/scaling.py measure [--steps 1000] [--hybrid]   # ~15 min on 2 cores: docs/figures/scaling.json
+    python scripts/scaling.py measure [--steps 1000] [--hybrid]   # ~17 min on 2 cores: docs/figures/scaling.json
+    python scripts/scaling.py measure --again 2x1                 # one run again, the rest of the file kept
     python scripts/scaling.py predict                 # the model: tables for docs/benchmarks.md and a PNG
 
 measure:
@@ -95,11 +96,27 @@ def gather_cost(points=12000):
     return dict(bytes=int(nbytes), seconds=float(dt), bytes_per_second=int(nbytes) / float(dt))
 
 
-def measure(steps, hybrid=False):
+def measure(steps, hybrid=False, again=None):
+    """Every run, the task costs and the gather rate; with ``again`` (a run label, e.g. '2x1') only
+    that run, the rest of the file kept and its previous entry moved to 'earlier'."""
+    if again:
+        res = json.loads(OUT.read_text())
+        res["earlier"] = res.get("earlier", []) + [{again: {"wall": res[again]["wall"],
+                                                              "per_rank": res[again].get("per_rank")},
+                                                      "meta": res["meta"]}]
+        ranks, threads = map(int, again.split("x"))
+        with tempfile.TemporaryDirectory() as tmp:
+            res[again] = bs.measure(bs.scene_text("p", steps, **PAIRS), ranks, tmp, out_name=f"{again}.h5",
+                                    threads=threads)
+        res[again]["measured"] = time.strftime("%Y-%m-%d %H:%M") + f" by python scripts/scaling.py measure --again {again}"
+        print(again, res[again]["wall"], flush=True)
+        OUT.write_text(json.dumps(res, indent=1))
+        return
     text = bs.scene_text("p", steps, **PAIRS)
     res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=steps,
                         scene=f"paper_poincare cut to {steps} steps", cores=2,
-                        command=f"python scripts/scaling.py measure --steps {steps}" + (" --hybrid" if hybrid else ""))}
+                        command=f"python scripts/scaling.py measure --steps {steps}" + (" --hybrid" if hybrid else ""),
+                        date=time.strftime("%Y-%m-%d %H:%M"))}
     with tempfile.TemporaryDirectory() as tmp:
         runs = (("1x1", 1, 1), ("2x1", 2, 1)) + ((("1x2", 1, 2),) if hybrid else ())
         for label, ranks, threads in runs:
@@ -111,6 +128,11 @@ def measure(steps, hybrid=False):
             print(other, "differ:", len(differ), "of", n, flush=True)
     res["tasks"], res["diag_per_point"] = task_costs()
     res["gather"] = gather_cost()
+    if OUT.exists():          # earlier measurements stay in the file: wall, per-rank phases, command
+        old = json.loads(OUT.read_text())
+        keep = {k: {"wall": v["wall"], "per_rank": v.get("per_rank")} for k, v in old.items()
+                if isinstance(v, dict) and "wall" in v}
+        res["earlier"] = old.get("earlier", []) + [dict(keep, meta=old.get("meta"))]
     OUT.write_text(json.dumps(res, indent=1))
     print("wrote", OUT)
 
@@ -223,9 +245,10 @@ def main():
     ap.add_argument("what", choices=("measure", "predict"))
     ap.add_argument("--steps", type=int, default=1000, help="steps of the paper scene (its own: 1,000)")
     ap.add_argument("--hybrid", action="store_true", help="also 1 rank x 2 threads")
+    ap.add_argument("--again", help="measure only this run (e.g. 2x1) again, keeping the rest of the file")
     args = ap.parse_args()
     if args.what == "measure":
-        measure(args.steps, args.hybrid)
+        measure(args.steps, args.hybrid, args.again)
     else:
         predict(args)
 

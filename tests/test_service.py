@@ -171,22 +171,6 @@ def test_results_are_bitwise_identical_for_1_2_3_4_and_8_ranks(tmp_path):
         assert same(files[1], files[n]), n
 
 
-@pytest.mark.mpi
-def test_points_moved_between_ranks_mid_pair_change_no_bits(tmp_path):
-    """The blocks are re-sized from a pair's own rates at its 1st, 2nd, 4th, … output, moving points
-    between ranks (driver._resplit).  Forced to move them to random block sizes at each of those
-    outputs, 3 ranks still write the one-rank file bit for bit."""
-    scene = tmp_path / "small.toml"
-    scene.write_text(SMALL)
-    assert poincare("run", str(scene), "-o", str(tmp_path / "one.h5"), "-q").returncode == 0
-    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
-    r = subprocess.run([mpiexec, "-n", "3", sys.executable, str(Path(__file__).with_name("mpi_resplit.py")),
-                        str(scene), str(tmp_path / "moved.h5")], capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    assert int(r.stdout.split("moved")[1]) == 6 * 4       # 6 pairs × outputs 1, 2, 4, 8 of 10
-    assert same(dump(tmp_path / "one.h5"), dump(tmp_path / "moved.h5"))
-
-
 def test_kill_and_resume_gives_the_same_bits(tmp_path):
     scene = tmp_path / "small.toml"
     scene.write_text(edit(SMALL, "steps = 40", "steps = 500"))

@@ -1,13 +1,13 @@
 """The batch-run driver: every (tableau, projection) pair of a scene, distributed over MPI ranks.
 
 The sample points (loop first, then the surface row by row) are split into contiguous
-blocks, one per rank, sized from each rank's measured advance rate with rank 0's smaller by the
-cost of its output work (see ``_split``): at the start of a pair from the previous pair's rates,
-then again after the pair's 1st, 2nd, 4th, 8th, … output from its own (``_resplit``: points move
-between ranks at an output).  At every output each rank takes the per-point errors of its points,
-the invariant tasks are computed on the ranks they were given to, and rank 0 appends one row to
-the HDF5 file (see :mod:`integrators.service.output`), plus a checkpoint of the full integrator
-state.  Because a point's trajectory does not depend on its batch,
+blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
+advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank
+advances its block with each pair.  At every output each rank takes the per-point errors of its
+points, the invariant tasks are computed on the ranks they were given to, and the other ranks hand
+their pieces to rank 0 without waiting for it (``_OutputWork.send``), which appends one row to the
+HDF5 file (see :mod:`integrators.service.output`), plus a checkpoint of the full integrator state.
+Because a point's trajectory does not depend on its batch,
 the file's numbers are bitwise the same for any number of ranks.  Without mpiexec
 (or without mpi4py) it runs as a single process.
 """
@@ -225,8 +225,7 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
         engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
     blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
     lo, hi = blocks[rank]
-    tasks = assign(scene, size)
-    out = _OutputWork(scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), tasks)
+    out = _OutputWork(scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size))
     if saved is None:
         st = engine.state(q0[lo:hi])
     else:
@@ -238,26 +237,11 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
     if start_step == 0:
         _output(comm, f, g, out, st, 0, h, after_output, name, clock)
-    # this rank's pace since the blocks were last sized: for re-sizing them from this pair's own rates
-    pace = dict(mark=time.perf_counter(), advance=0.0, work=clock["invariants"] + clock["hdf5"], outputs=0)
 
     def on_output(step):
-        nonlocal out
-        pace["advance"] += time.perf_counter() - pace["mark"]
         if rank == 0:
             output.wall_clock(g, wall0 + time.perf_counter() - t_start)
-        full = _output(comm, f, g, out, st, step, h, after_output, name, clock)
-        pace["outputs"] += 1
-        if size > 1 and pace["outputs"] in RESPLIT_AT:
-            t0 = time.perf_counter()
-            work = clock["invariants"] + clock["hdf5"]
-            new = _resplit(comm, n, (pace["advance"], out.block[1] - out.block[0], work - pace["work"]),
-                           full, st)
-            if new is not None:
-                out = _OutputWork(scene, Diagnostics(scene, system, q0[new[0]:new[1]]), new, tasks)
-                pace.update(advance=0.0, work=work)
-            clock["gather"] += time.perf_counter() - t0
-        pace["mark"] = time.perf_counter()
+        _output(comm, f, g, out, st, step, h, after_output, name, clock)
 
     done = [start_step]
 
@@ -268,8 +252,9 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
 
     clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
                               _check_stop)
+    out.finish_sending()
     timings[name] = clock
-    clocks = comm.gather(dict(clock, points=out.block[1] - out.block[0]), root=0)
+    clocks = comm.gather(dict(clock, points=hi - lo), root=0)
     if rank != 0:
         return offload, speed
     clock["per_rank"] = clocks                 # every rank's phases, for the cost model (scripts/scaling.py)
@@ -278,33 +263,6 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
     output.close_pair(g, scene.n_outputs, threshold)
     f.flush()
     return _balance(stats)
-
-
-# outputs of a pair (counted from where this process started it) after which the blocks are re-sized
-# from the pair's own measured rates, when that moves more than RESPLIT_MIN of an even share
-RESPLIT_AT = frozenset(2 ** k for k in range(20))
-RESPLIT_MIN = 0.02
-
-
-def _resplit(comm, n, pace, full, st):
-    """Re-size the ranks' blocks from each rank's (advance seconds, points, output seconds) since they
-    were last sized; rank 0 sends every rank its new points from the checkpoint it has just gathered
-    (``full``) and each loads them into ``st``.  Returns this rank's new (lo, hi), or None when the
-    blocks stay.  The points move at an output, where every next solve starts from a fresh Jacobian,
-    so the run's bits do not depend on whether or where this happens."""
-    stats = comm.gather(pace, root=0)
-    new = None
-    if comm.rank == 0:
-        proposal = _split(n, comm.size, *_balance(stats))
-        change = max(abs((b - a) - p[1]) for (a, b), p in zip(proposal, stats))
-        if change > RESPLIT_MIN * n / comm.size:
-            new = proposal
-    new = comm.bcast(new, root=0)
-    if new is None:
-        return None
-    parts = [{k: v[a:b] for k, v in full.items()} for a, b in new] if comm.rank == 0 else None
-    st.load(comm.scatter(parts, root=0))
-    return new[comm.rank]
 
 
 def _unpad(state, s):
@@ -319,6 +277,21 @@ class _OutputWork:
     diagnostics: Diagnostics
     block: tuple                    # (lo, hi): the rows this rank advances
     tasks: dict                     # {(invariant, form): rank}, the same on every rank
+    sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
+
+    def send(self, comm, payload):
+        """Hand this output's pieces to rank 0 without waiting for it to take them (it may still be
+        on its own tasks or writing): the rank goes on advancing; the last output's send is
+        finished first (by then rank 0 has received it)."""
+        self.finish_sending()
+        self.sending.append(comm.isend(payload, dest=0, tag=OUTPUT_TAG))
+
+    def finish_sending(self):
+        while self.sending:
+            self.sending.pop().wait()
+
+
+OUTPUT_TAG = 7
 
 
 def _output(comm, f, g, out, st, step, h, after_output, name, clock):
@@ -352,12 +325,15 @@ def _output(comm, f, g, out, st, step, h, after_output, name, clock):
         values.update(out.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
                                                  live))
     t1 = time.perf_counter()
-    parts = comm.gather((errors, values, ck), root=0)
+    if rank != 0:                # pickled at once: the state may move on while the message travels
+        out.send(comm, (errors, values, ck))
+    else:
+        parts = [(errors, values, ck)] + [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
     t2 = time.perf_counter()
     clock["invariants"] += t1 - t0 - wait
     clock["gather"] += wait + t2 - t1
     if rank != 0:
-        return None
+        return
     full = _concat([x[2] for x in parts])
     row = out.diagnostics.combine(step * h, [x[0] for x in parts], {k: v for x in parts for k, v in x[1].items()})
     t3 = time.perf_counter()
@@ -369,7 +345,6 @@ def _output(comm, f, g, out, st, step, h, after_output, name, clock):
     clock["hdf5"] += time.perf_counter() - t3
     if after_output is not None:
         after_output(name, step)
-    return full
 
 
 def finalize(path, scene):
