@@ -19,7 +19,7 @@ trajectory
 invariants
     guiding_centre_symmetric, the paper's loop with 1,000 points and surface with 32 × 32
     Chebyshev points (both resolved to round-off by the exact flow at T = 10⁵), h = 10 for
-    ``--steps`` steps: the relative error |I(T) − I(0)|/|I(0)| of the noncanonical I₁ and I₂
+    ``--steps`` steps (T = 10⁵), and with h = 20, 40, 80 (``--h``) to the same T: the relative error |I(T) − I(0)|/|I(0)| of the noncanonical I₁ and I₂
     for a set of VPRK pairs and for DOP853/Radau over tolerances.
 """
 import argparse
@@ -140,6 +140,8 @@ INV_PAIRS = [("GLRK1", "none"), ("GLRK1", "symmetric"), ("GLRK1", "midpoint"), (
 
 
 def invariants(args):
+    """Runs each pair at each step size of ``--h`` to T = h·steps of the first (10⁵), and the scipy
+    methods; new runs replace the file's runs of the same method and step (or tolerance)."""
     DATA.mkdir(parents=True, exist_ok=True)
     system = integrators.system("guiding_centre_symmetric")
     loop_q = samples.loop(n=1000)
@@ -148,32 +150,40 @@ def invariants(args):
     q0 = np.concatenate([loop_q, surf_q.reshape(-1, 4)])
     I1_0 = forms.first_invariant(loop_q, "noncanonical", system).value
     I2_0 = forms.second_invariant(surf_q, "noncanonical", system).value
-    h, steps = 10.0, args.steps
-    T = h * steps
-    split = lambda q: (q[:1000], q[1000:].reshape(ns + (4,)))
+    T = 10.0 * args.steps
+    split = lambda q: (q[:1000], q[1000:].reshape(ns + (4,)))      # noqa: E731
     exact = invariant_errors(system, *split(system.exact_flow(q0, T)), I1_0, I2_0)
-    out = {"meta": dict(machine=platform.platform(), python=platform.python_version(), loop=1000,
-                        surface=list(ns), h=h, steps=steps, T=T, exact_flow=exact), "runs": []}
+    path = DATA / "invariants.json"
+    out = json.loads(path.read_text()) if path.exists() else {"runs": []}
+    if out.get("meta", {}).get("T", T) != T:
+        raise SystemExit(f"{path} holds runs to T = {out['meta']['T']:g}, not {T:g}: move it away first")
+    out["meta"] = dict(machine=platform.platform(), python=platform.python_version(), loop=1000,
+                       surface=list(ns), h=10.0, steps=args.steps, T=T, exact_flow=exact)
     print("exact flow", exact, flush=True)
+
+    def record(run):
+        key = (run["method"], run.get("h"), run.get("tol"))
+        out["runs"] = [r for r in out["runs"] if (r["method"], r.get("h", 10.0 if "tol" not in r else None),
+                                                  r.get("tol")) != key] + [run]
+        print(run, flush=True)
+        path.write_text(json.dumps(out, indent=0))
     pairs = [tuple(p.split(":")) for p in args.pairs] if args.pairs else INV_PAIRS
     for tab, proj in pairs:
-        t0 = time.perf_counter()
-        sol = integrate(system, q0, tab, proj, h, steps=steps, save_every=steps)
-        wall = time.perf_counter() - t0
-        broke = int(np.isfinite(sol.breakdown_time).sum())
-        e1, e2, under = invariant_errors(system, *split(sol.q[-1]), I1_0, I2_0)
-        out["runs"].append(dict(method=f"{tab}-{proj}", wall=wall, I1=e1, I2=e2, under_resolved=under, broke=broke))
-        print(out["runs"][-1], flush=True)
-        (DATA / "invariants.json").write_text(json.dumps(out, indent=0))
+        for h in args.h:
+            steps = int(round(T / h))
+            t0 = time.perf_counter()
+            sol = integrate(system, q0, tab, proj, h, steps=steps, save_every=steps)
+            wall = time.perf_counter() - t0
+            broke = int(np.isfinite(sol.breakdown_time).sum())
+            e1, e2, under = invariant_errors(system, *split(sol.q[-1]), I1_0, I2_0)
+            record(dict(method=f"{tab}-{proj}", h=h, wall=wall, I1=e1, I2=e2, under_resolved=under, broke=broke))
     for method, tols in (("DOP853", [1e-6, 1e-8, 1e-10, 1e-12]), ("Radau", [1e-6, 1e-8, 1e-10])):
         if method not in args.scipy:
             continue
         for tol in tols:
             q, wall, nfev = scipy_solve(system, q0, T, method, tol)
             e1, e2, under = (None, None, None) if q is None else invariant_errors(system, *split(q), I1_0, I2_0)
-            out["runs"].append(dict(method=method, tol=tol, wall=wall, I1=e1, I2=e2, under_resolved=under, nfev=nfev))
-            print(out["runs"][-1], flush=True)
-            (DATA / "invariants.json").write_text(json.dumps(out, indent=0))
+            record(dict(method=method, tol=tol, wall=wall, I1=e1, I2=e2, under_resolved=under, nfev=nfev))
 
 
 FAMILY = {"GLRK": "tab:blue", "SRK3": "tab:green", "LobIIID": "tab:purple", "LobIIIE": "tab:pink",
@@ -293,18 +303,28 @@ def table(args):
         inv = json.loads(p.read_text())
         runs = [dict(r, error=None if r["I1"] is None else max(r["I1"], r["I2"])) for r in inv["runs"]]
         m = inv["meta"]
-        print(f"\nInvariants, guiding_centre_symmetric, {m['steps']:,} steps of h = {m['h']:g} (T = {m['T']:g}); "
+        hs = sorted({r.get("h", 10.0) for r in inv["runs"] if "tol" not in r})
+        print(f"\nInvariants, guiding_centre_symmetric, T = {m['T']:g}, h = {', '.join(f'{h:g}' for h in hs)}; "
               "error: the larger of the noncanonical I₁ and I₂ relative errors at T:\n")
-        print("| error ≤ | fastest VPRK pair | time | DOP853 (tol) | time | Radau (tol) | time |")
-        print("|---|---|---:|---|---:|---|---:|")
+        print("| error ≤ | fastest VPRK pair (h) | time | DOP853 (tol) | time | Radau (tol) | time | best scipy / VPRK |")
+        print("|---|---|---:|---|---:|---|---:|---:|")
         for e in (1e-6, 1e-9, 1e-11):
             reach = lambda r: r["error"] is not None and r["error"] <= e and not r.get("broke")  # noqa: E731
             v = fastest([r for r in runs if "tol" not in r], reach)
             d = fastest([r for r in runs if r["method"] == "DOP853"], reach)
             rd = fastest([r for r in runs if r["method"] == "Radau"], reach)
-            cells = (_cell(v, lambda r: r["method"]) + _cell(d, lambda r: f"DOP853 ({r['tol']:g})")
+            cells = (_cell(v, lambda r: f"{r['method']} ({r.get('h', 10.0):g})") + _cell(d, lambda r: f"DOP853 ({r['tol']:g})")
                      + _cell(rd, lambda r: f"Radau ({r['tol']:g})"))
-            print(f"| {e:.0e} | " + " | ".join(cells) + " |")
+            best = min([r["wall"] for r in (d, rd) if r is not None], default=None)
+            ratio = "—" if v is None or best is None else f"{best / v['wall']:.1f}×"
+            print(f"| {e:.0e} | " + " | ".join(cells) + f" | {ratio} |")
+        print("\nEvery run (relative errors of I₁ / I₂ at T, wall time):\n")
+        print("| run | h or tol | I₁ | I₂ | time |")
+        print("|---|---:|---:|---:|---:|")
+        for r in sorted(inv["runs"], key=lambda r: ("tol" in r, r["method"], r.get("h", 0), -r.get("tol", 0))):
+            f = lambda x: "—" if x is None else f"{x:.1e}"     # noqa: E731
+            note = f" ({r['broke']} points broke down)" if r.get("broke") else ""
+            print(f"| {r['method']}{note} | {r.get('h', r.get('tol', 10.0)):g} | {f(r['I1'])} | {f(r['I2'])} | {r['wall']:.0f} s |")
 
 
 def main():
@@ -314,7 +334,8 @@ def main():
     t.add_argument("--systems", nargs="+", default=list(SYSTEMS))
     t.add_argument("--points", type=int, default=NPOINTS, help="points per run (16; 1 for single trajectories)")
     i = sub.add_parser("invariants")
-    i.add_argument("--steps", type=int, default=10000)
+    i.add_argument("--steps", type=int, default=10000, help="steps of h = 10: T = 10 steps")
+    i.add_argument("--h", nargs="+", type=float, default=[10.0, 20.0, 40.0, 80.0], help="step sizes of the VPRK runs")
     i.add_argument("--pairs", nargs="+")
     i.add_argument("--scipy", nargs="*", default=["DOP853", "Radau"],
                    help="scipy methods to compare (Radau at 1e-10 alone takes about 18 minutes)")
