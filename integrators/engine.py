@@ -199,19 +199,9 @@ class State:
     def from_checkpoint(cls, fields, h):
         """A state from the :data:`CHECKPOINT_FIELDS` of a checkpoint (arrays copied)."""
         st = cls(fields["q"], fields["p"], np.zeros_like(fields["q"]), h, fields["Y"].shape[1])
-        st.load(fields)
-        return st
-
-    def load(self, fields):
-        """Become the state of the checkpoint ``fields`` (any number of points; arrays copied), in
-        place, with no Newton factors: the next solve of every point starts from a fresh Jacobian, as
-        after any output, so a state loaded from a checkpoint steps bitwise as the one saved."""
         for name in CHECKPOINT_FIELDS:
-            setattr(self, name, np.ascontiguousarray(fields[name]).copy())
-        n = self.q.shape[0]
-        self.lu = np.empty((n, 0, 0), self.q.dtype)
-        self.piv = np.empty((n, 0), np.int64)
-        self.have_lu = np.zeros(n, dtype=bool)
+            setattr(st, name, np.ascontiguousarray(fields[name]).copy())
+        return st
 
     @classmethod
     def schema(cls, n, d, s) -> dict:
