@@ -55,6 +55,8 @@ def edit(text, old, new):
     (("output_every = 4", "output_every = 0"), "run.output_every"),
     (("forms = [", "forms = ['magic', "), "unknown value 'magic'"),
     (("[run]", "[run]\ntableaus = 3\n"), "not valid TOML"),
+    (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoint_seconds = -1.0\n'), "output.checkpoint_seconds"),
+    (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoint_seconds = inf\n'), "output.checkpoint_seconds"),
 ])
 def test_bad_scenes_name_the_key(change, msg):
     with pytest.raises(SceneError, match=msg):
@@ -141,6 +143,38 @@ def test_no_surface_means_no_surface_data(tmp_path):
         g = f["runs/GLRK2-none"]
         assert "I2" not in g and "resolution/I2" not in g and "points" not in g
         assert g["breakdown_time"].shape == (64,)
+
+
+def test_the_state_is_written_every_few_outputs_and_a_resume_recomputes_the_rows_after_it(tmp_path, monkeypatch):
+    """The state goes to the file about every output.checkpoint_seconds, not at every output: with
+    the default (60 s) this small run writes it once a pair, at the end.  Forced to every 3rd output,
+    a run stopped at output 7 of a pair has 8 rows but its state at output 6; the resume drops row 7,
+    computes it again, and the file is the uninterrupted run's, bit for bit."""
+    scene = parse_scene(SMALL)
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    driver.run(scene, full, progress=False)
+    with h5py.File(full) as f:
+        for name in f["runs"]:
+            assert sorted(int(f["runs"][name][f"checkpoint/{s}/step"][()]) for s in "ab") == [-1, 40], name
+    monkeypatch.setattr(driver, "_cadence", lambda seconds_per_output, checkpoint_seconds: 3)
+
+    def stop(pair, step):
+        if pair == "GLRK2-none" and step == 28:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        driver.run(scene, part, progress=False, after_output=stop)
+    with h5py.File(part) as f:
+        g = f["runs/GLRK2-none"]
+        assert g["t"].shape[0] == 8
+        assert sorted(int(g[f"checkpoint/{s}/step"][()]) for s in "ab") == [12, 24]
+    driver.run(scene, part, progress=False, resume=True)
+    assert same(dump(full, skip=("wall_clock", "checkpoint")), dump(part, skip=("wall_clock", "checkpoint")))
+
+
+def test_checkpoint_cadence_follows_the_measured_interval():
+    assert driver._cadence(0.5, 60.0) == 120 and driver._cadence(100.0, 60.0) == 1
+    assert driver._cadence(0.5, 0.0) == 1 and driver._cadence(0.0, 60.0) == 60_000_000
 
 
 def poincare(*args, n=None, **kw):

@@ -6,7 +6,8 @@ advance rate and rank 0's is smaller by the cost of its output work (see ``_spli
 advances its block with each pair.  At every output each rank takes the per-point errors of its
 points, the invariant tasks are computed on the ranks they were given to, and the other ranks hand
 their pieces to rank 0 without waiting for it (``_OutputWork.send``), which appends one row to the
-HDF5 file (see :mod:`integrators.service.output`), plus a checkpoint of the full integrator state.
+HDF5 file (see :mod:`integrators.service.output`); about every ``output.checkpoint_seconds`` and at
+a pair's end the full integrator state comes with it, as a checkpoint.
 Because a point's trajectory does not depend on its batch,
 the file's numbers are bitwise the same for any number of ranks.  Without mpiexec
 (or without mpi4py) it runs as a single process.
@@ -236,12 +237,20 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
     t_start = time.perf_counter()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
     if start_step == 0:
-        _output(comm, f, g, out, st, 0, h, after_output, name, clock)
+        _output(comm, f, g, out, st, 0, h, after_output, name, clock, checkpoint=False)
+    cadence = [1]
 
     def on_output(step):
+        j = (step - start_step) // scene.output_every
+        if j == 1:        # rank 0's first interval sets how many outputs apart this pair writes its state
+            w0 = time.perf_counter()
+            cadence[0] = comm.bcast(_cadence(w0 - t_start, scene.checkpoint_seconds) if rank == 0 else None,
+                                    root=0)
+            clock["gather"] += time.perf_counter() - w0
         if rank == 0:
             output.wall_clock(g, wall0 + time.perf_counter() - t_start)
-        _output(comm, f, g, out, st, step, h, after_output, name, clock)
+        _output(comm, f, g, out, st, step, h, after_output, name, clock,
+                checkpoint=step == scene.steps or j % cadence[0] == 0)
 
     done = [start_step]
 
@@ -278,6 +287,7 @@ class _OutputWork:
     block: tuple                    # (lo, hi): the rows this rank advances
     tasks: dict                     # {(invariant, form): rank}, the same on every rank
     sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
+    breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
 
     def send(self, comm, payload):
         """Hand this output's pieces to rank 0 without waiting for it to take them (it may still be
@@ -294,19 +304,25 @@ class _OutputWork:
 OUTPUT_TAG = 7
 
 
-def _output(comm, f, g, out, st, step, h, after_output, name, clock):
+def _cadence(seconds_per_output, checkpoint_seconds) -> int:
+    """Outputs between two checkpoints: as many as take about ``checkpoint_seconds`` (1 for 0)."""
+    if checkpoint_seconds <= 0:
+        return 1
+    return max(1, int(checkpoint_seconds / max(seconds_per_output, 1e-6)))
+
+
+def _output(comm, f, g, out, st, step, h, after_output, name, clock, checkpoint):
     """One output: per-point errors on every rank, each (set, form) invariant on the rank the task
-    belongs to (the set's points gathered there), then the row, the points and the checkpoint on
-    rank 0, which writes the file."""
-    # every output is a checkpoint: the next step starts from fresh Jacobians on every rank, so
-    # a resumed run (which has no Jacobians to carry) is bitwise the uninterrupted one
-    st.forget_jacobians()
+    belongs to (the set's points gathered there), then the row and the breakdown times (with
+    ``checkpoint``, the full state too) on rank 0, which writes the file.
+
+    Any output may be where a resumed run starts: ``march`` has dropped the Newton Jacobians here, so
+    writing the state at only some outputs changes no bits."""
     rank, scene = comm.rank, out.scene
     lo, hi = out.block
     t0 = time.perf_counter()
-    ck = st.checkpoint()
-    mine = (ck["q"], ck["p"], ck["Lam"] / h, ck["live"])
-    errors = out.diagnostics.point_errors(*mine[:2], mine[3])
+    mine = (st.q, st.p, st.Lam / h, st.live)
+    errors = out.diagnostics.point_errors(st.q, st.p, st.live)
     values, wait, held = {}, 0.0, []
     for spec, rows in scene.sample_sets:      # every gather first, so that the ranks then work at once
         a, b = max(lo, rows.start), min(hi, rows.stop)
@@ -324,11 +340,15 @@ def _output(comm, f, g, out, st, step, h, after_output, name, clock):
         forms = [fm for fm in scene.forms if out.tasks[(spec.invariant, fm)] == rank]
         values.update(out.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
                                                  live))
+    if checkpoint:
+        piece = st.checkpoint()
+    else:                        # what a row needs of the points: a few bytes a point, not the state
+        piece = {"breakdown_time": st.breakdown_time} | ({"q": st.q} if scene.store_points else {})
     t1 = time.perf_counter()
     if rank != 0:                # pickled at once: the state may move on while the message travels
-        out.send(comm, (errors, values, ck))
+        out.send(comm, (errors, values, piece))
     else:
-        parts = [(errors, values, ck)] + [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
+        parts = [(errors, values, piece)] + [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
     t2 = time.perf_counter()
     clock["invariants"] += t1 - t0 - wait
     clock["gather"] += wait + t2 - t1
@@ -341,7 +361,10 @@ def _output(comm, f, g, out, st, step, h, after_output, name, clock):
     if scene.store_points:
         for spec, rows in scene.sample_sets:
             row[f"points/{spec.name}"] = full["q"][rows].reshape(spec.grid + (full["q"].shape[1],))
-    output.write_output(f, g, step, row, full)
+    bt = full["breakdown_time"]
+    changed = out.breakdown_written is None or not np.array_equal(bt, out.breakdown_written)
+    output.write_output(f, g, step, row, bt if changed else None, full if checkpoint else None)
+    out.breakdown_written = bt
     clock["hdf5"] += time.perf_counter() - t3
     if after_output is not None:
         after_output(name, step)

@@ -14,7 +14,7 @@ Layout (format ``poincare/2``)::
         constraint_error    (n,)       max over points of |p − ϑ(q)|
         breakdown_time      (npoints,) per point, inf = never (loop points first, then the surface row by row)
         points/loop, points/surface    (n, N, d), (n, nσ, nτ, d) only with run.store_points
-        checkpoint/a, checkpoint/b     two alternating copies of the integrator state
+        checkpoint/a, checkpoint/b     two alternating copies of the integrator state (see below)
         attrs: status, wall_time [s], under_resolved_from/I1, under_resolved_from/I2 (first output time at
                which the set was under-resolved; absent while it is resolved)
 
@@ -31,9 +31,15 @@ so a run killed at any moment leaves a readable file with every output up to the
 last flush.  Every chunked dataset carries HDF5's fletcher32 checksum, so damaged bytes
 are reported on reading (:class:`DamagedFile`) instead of being plotted.  The file uses
 HDF5's default (earliest) format: the newer superblock keeps "open for writing" flags that
-a killed writer leaves set, after which plain readers refuse the file.  A checkpoint slot is
-first marked invalid (step = −1), then written, then given its step; resume uses the newest
-valid slot and drops any rows written after it.
+a killed writer leaves set, after which plain readers refuse the file.
+
+The integrator state is written about every ``output.checkpoint_seconds`` of wall time (default
+60 s; 0: at every output) and at each pair's last output, not at every output: a row is a few
+dozen numbers, a state about 300 bytes a point.  A checkpoint slot is first marked invalid
+(step = −1), then written, then given its step; resume uses the newest valid slot, drops the rows
+written after it and computes them again.  Every output starts the next step from fresh Newton
+Jacobians, so a run resumed from any output is bitwise the uninterrupted one, and how often the
+state is written changes no result.
 """
 from __future__ import annotations
 
@@ -348,21 +354,29 @@ def restart_pair(f, name, output_every, finished_too=False):
     g.attrs["status"] = "pending"
     if step is None:
         truncate(g, 0)
+        g["breakdown_time"][...] = np.inf
         return 0, None
     truncate(g, step // output_every + 1)
+    g["breakdown_time"][...] = state["breakdown_time"]   # as of the checkpoint: later rows are gone
     return step, state
 
 
-def write_output(f, g, step, row, state):
-    """Append one output row, the points' breakdown times and the checkpoint of the full state at
-    ``step`` (stage arrays padded to the file's largest s); refuses, naming the last output
-    written, when the disk cannot hold it."""
-    need = sum(np.asarray(v).nbytes for v in row.values()) + sum(v.nbytes for v in state.values())
+def write_output(f, g, step, row, breakdown_time=None, state=None):
+    """Append one output row; with ``breakdown_time`` (when it changed) the points' breakdown times,
+    and with ``state`` the checkpoint of the full integrator state at ``step`` (stage arrays padded to
+    the file's largest s).  Refuses, naming the last output written, when the disk cannot hold it."""
+    need = sum(np.asarray(v).nbytes for v in row.values())
+    need += (0 if breakdown_time is None else breakdown_time.nbytes) + \
+        (0 if state is None else sum(v.nbytes for v in state.values()))
     last = f"{g.name.rsplit('/', 1)[-1]} t = {g['t'][-1]:g}" if g["t"].shape[0] else \
         f"the pair before {g.name.rsplit('/', 1)[-1]}"
     ensure_space(f.filename, need, last)
     append(g, row)
-    g["breakdown_time"][...] = state["breakdown_time"]
+    if breakdown_time is not None:
+        g["breakdown_time"][...] = breakdown_time
+    if state is None:
+        f.flush()
+        return
     Y, s_max = state["Y"], g["checkpoint/a/Y"].shape[1]
     if Y.shape[1] < s_max:
         state = dict(state, Y=np.concatenate([Y, np.zeros((Y.shape[0], s_max - Y.shape[1], Y.shape[2]))], axis=1))

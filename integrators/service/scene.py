@@ -47,6 +47,8 @@ A scene file::
 
     [output]
     path = "my-run.h5"
+    checkpoint_seconds = 60.0             # write the integrator state about this often (and at each pair's
+                                          # end); 0: at every output.  A kill loses at most this much work.
 
 Files named in a scene (tableaus, file.py:function) are looked up next to the scene file, then in
 the current directory.  Every mistake is a :class:`SceneError` whose message names the key; an
@@ -144,6 +146,7 @@ class Scene:
     store_points: bool
     output: str
     text: str
+    checkpoint_seconds: float = 60.0  # wall time between checkpoints (0: every output); results do not depend on it
     base: str | None = None          # directory of the scene file: where a relative file.py:function is looked up
     system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
@@ -232,7 +235,7 @@ _SCHEMA = {
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
             "forms": list, "diagnostics": list, "store_points": bool},
-    "output": {"path": str},
+    "output": {"path": str, "checkpoint_seconds": float},
 }
 
 
@@ -363,9 +366,13 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
                 raise SceneError(f"run: {why}")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
     out = data.get("output", {}).get("path", f"{name}.h5")
+    ck_seconds = float(data.get("output", {}).get("checkpoint_seconds", 60.0))
+    if not (math.isfinite(ck_seconds) and ck_seconds >= 0):
+        raise SceneError(f"output.checkpoint_seconds must be a finite number ≥ 0, got {ck_seconds!r}")
     scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
+                  checkpoint_seconds=ck_seconds,
                   base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps)
     _check_points(scene, system)
     for label in {step_map_label(m) for m in maps}:
