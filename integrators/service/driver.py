@@ -3,12 +3,13 @@
 The sample points (loop first, then the surface row by row) are split into contiguous
 blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
 advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank
-advances its block with each pair.  At every output each rank takes the per-point errors of its
-points, the invariant tasks are computed on the ranks they were given to, and the other ranks hand
-their pieces to rank 0 without waiting for it (``_OutputWork.send``), which appends one row to the
-HDF5 file (see :mod:`integrators.service.output`); about every ``output.checkpoint_seconds`` and at
-a pair's end the full integrator state comes with it, as a checkpoint.
-Because a point's trajectory does not depend on its batch,
+advances its block with each pair.  At every output each rank keeps the per-point errors of its
+points and its part of each sample set; once a batch of outputs (about two seconds of advancing,
+``_Outputs``) the sets' parts are gathered to the ranks that were given their invariant tasks, the
+tasks run there, and the other ranks hand their pieces to rank 0 without waiting for it, which
+appends the rows to the HDF5 file (see :mod:`integrators.service.output`); about every
+``output.checkpoint_seconds`` and at a pair's end the full integrator state comes with them, as a
+checkpoint.  Because a point's trajectory does not depend on its batch,
 the file's numbers are bitwise the same for any number of ranks.  Without mpiexec
 (or without mpi4py) it runs as a single process.
 """
@@ -226,7 +227,6 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
         engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
     blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
     lo, hi = blocks[rank]
-    out = _OutputWork(scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size))
     if saved is None:
         st = engine.state(q0[lo:hi])
     else:
@@ -236,21 +236,21 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
     wall0 = output.wall_clock(g) if rank == 0 else 0.0
     t_start = time.perf_counter()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
+    out = _Outputs(comm, scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size), f, g,
+                   clock, after_output, name, lambda: wall0 + time.perf_counter() - t_start)
     if start_step == 0:
-        _output(comm, f, g, out, st, 0, h, after_output, name, clock, checkpoint=False)
-    cadence = [1]
+        out.take(st, 0, checkpoint=False, flush=False)
 
     def on_output(step):
         j = (step - start_step) // scene.output_every
-        if j == 1:        # rank 0's first interval sets how many outputs apart this pair writes its state
+        if j == 1:        # rank 0's first interval sets the batches of outputs and how often the state is written
             w0 = time.perf_counter()
-            cadence[0] = comm.bcast(_cadence(w0 - t_start, scene.checkpoint_seconds) if rank == 0 else None,
-                                    root=0)
+            out.batch, out.cadence = comm.bcast(
+                (_batch(w0 - t_start, hi - lo), _cadence(w0 - t_start, scene.checkpoint_seconds))
+                if rank == 0 else None, root=0)
             clock["gather"] += time.perf_counter() - w0
-        if rank == 0:
-            output.wall_clock(g, wall0 + time.perf_counter() - t_start)
-        _output(comm, f, g, out, st, step, h, after_output, name, clock,
-                checkpoint=step == scene.steps or j % cadence[0] == 0)
+        last = step == scene.steps
+        out.take(st, step, checkpoint=last or j % out.cadence == 0, flush=last or j % out.batch == 0)
 
     done = [start_step]
 
@@ -278,30 +278,14 @@ def _unpad(state, s):
     return dict(state, Y=state["Y"][:, :s])
 
 
-@dataclasses.dataclass
-class _OutputWork:
-    """What one rank does at an output: its block's diagnostics and its invariant tasks."""
-
-    scene: object
-    diagnostics: Diagnostics
-    block: tuple                    # (lo, hi): the rows this rank advances
-    tasks: dict                     # {(invariant, form): rank}, the same on every rank
-    sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
-    breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
-
-    def send(self, comm, payload):
-        """Hand this output's pieces to rank 0 without waiting for it to take them (it may still be
-        on its own tasks or writing): the rank goes on advancing; the last output's send is
-        finished first (by then rank 0 has received it)."""
-        self.finish_sending()
-        self.sending.append(comm.isend(payload, dest=0, tag=OUTPUT_TAG))
-
-    def finish_sending(self):
-        while self.sending:
-            self.sending.pop().wait()
+BATCH_SECONDS = 2.0          # outputs are taken together in batches of about this much advancing
+BATCH_BYTES = 1 << 28        # ... holding no more than this of a rank's points
 
 
-OUTPUT_TAG = 7
+def _batch(seconds_per_output, points) -> int:
+    """Outputs a rank holds before the ranks meet: about BATCH_SECONDS of advancing, within BATCH_BYTES."""
+    by_time = int(BATCH_SECONDS / max(seconds_per_output, 1e-6))
+    return max(1, min(by_time, BATCH_BYTES // (128 * max(points, 1))))
 
 
 def _cadence(seconds_per_output, checkpoint_seconds) -> int:
@@ -311,63 +295,143 @@ def _cadence(seconds_per_output, checkpoint_seconds) -> int:
     return max(1, int(checkpoint_seconds / max(seconds_per_output, 1e-6)))
 
 
-def _output(comm, f, g, out, st, step, h, after_output, name, clock, checkpoint):
-    """One output: per-point errors on every rank, each (set, form) invariant on the rank the task
-    belongs to (the set's points gathered there), then the row and the breakdown times (with
-    ``checkpoint``, the full state too) on rank 0, which writes the file.
+OUTPUT_TAG = 7
 
-    Any output may be where a resumed run starts: ``march`` has dropped the Newton Jacobians here, so
-    writing the state at only some outputs changes no bits."""
-    rank, scene = comm.rank, out.scene
-    lo, hi = out.block
-    t0 = time.perf_counter()
-    mine = (st.q, st.p, st.Lam / h, st.live)
-    errors = out.diagnostics.point_errors(st.q, st.p, st.live)
-    values, wait, held = {}, 0.0, []
-    for spec, rows in scene.sample_sets:      # every gather first, so that the ranks then work at once
-        a, b = max(lo, rows.start), min(hi, rows.stop)
-        part = tuple(x[max(a - lo, 0):max(b - lo, 0)] for x in mine)
-        owners = sorted({r for (inv, _), r in out.tasks.items() if inv == spec.invariant})
-        for owner in owners:
-            w0 = time.perf_counter()
-            parts = comm.gather(part, root=owner)
-            wait += time.perf_counter() - w0
-            if rank == owner:
-                held.append((spec, parts))
-    for spec, parts in held:
-        shp = spec.grid + (mine[0].shape[1],)
-        q, p, lam, live = (np.concatenate([x[k] for x in parts]) for k in range(4))
-        forms = [fm for fm in scene.forms if out.tasks[(spec.invariant, fm)] == rank]
-        values.update(out.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
-                                                 live))
-    if checkpoint:
-        piece = st.checkpoint()
-    else:                        # what a row needs of the points: a few bytes a point, not the state
-        piece = {"breakdown_time": st.breakdown_time} | ({"q": st.q} if scene.store_points else {})
-    t1 = time.perf_counter()
-    if rank != 0:                # pickled at once: the state may move on while the message travels
-        out.send(comm, (errors, values, piece))
-    else:
-        parts = [(errors, values, piece)] + [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
-    t2 = time.perf_counter()
-    clock["invariants"] += t1 - t0 - wait
-    clock["gather"] += wait + t2 - t1
-    if rank != 0:
-        return
-    full = _concat([x[2] for x in parts])
-    row = out.diagnostics.combine(step * h, [x[0] for x in parts], {k: v for x in parts for k, v in x[1].items()})
-    t3 = time.perf_counter()
-    clock["invariants"] += t3 - t2
-    if scene.store_points:
-        for spec, rows in scene.sample_sets:
-            row[f"points/{spec.name}"] = full["q"][rows].reshape(spec.grid + (full["q"].shape[1],))
-    bt = full["breakdown_time"]
-    changed = out.breakdown_written is None or not np.array_equal(bt, out.breakdown_written)
-    output.write_output(f, g, step, row, bt if changed else None, full if checkpoint else None)
-    out.breakdown_written = bt
-    clock["hdf5"] += time.perf_counter() - t3
-    if after_output is not None:
-        after_output(name, step)
+
+@dataclasses.dataclass
+class _Output:
+    """What a rank keeps of one output until its batch is taken: its points' errors, its part of
+    each sample set (q, p, λ, live), and what rank 0 writes of its points."""
+
+    step: int
+    checkpoint: bool
+    errors: dict
+    parts: list
+    piece: dict
+
+
+@dataclasses.dataclass
+class _Outputs:
+    """One rank's outputs of one pair.
+
+    The outputs are taken in batches (:func:`_batch`: about two seconds of advancing; a batch also
+    ends at a checkpoint and at the pair's last output), so the ranks meet once a batch, not at
+    every output, and what one rank's advance gains or loses on the other's in one interval evens
+    out over the batch.  At a batch's end the sets' parts are gathered to the ranks that hold one
+    of the set's tasks, the tasks run, the other ranks hand their pieces to rank 0 without waiting
+    for it (:meth:`send`), and rank 0 writes the rows in order, each flushed.
+    """
+
+    comm: object
+    scene: object
+    diagnostics: Diagnostics
+    block: tuple                    # (lo, hi): the rows this rank advances
+    tasks: dict                     # {(invariant, form): rank}, the same on every rank
+    f: object                       # rank 0: the file and the pair's group
+    g: object
+    clock: dict
+    after_output: object
+    name: str
+    wall: object                    # rank 0: the pair's wall time so far, for its row
+    batch: int = 1                  # outputs a batch (from the pair's first interval, on every rank)
+    cadence: int = 1                # outputs between checkpoints
+    held: list = dataclasses.field(default_factory=list)
+    sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
+    breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
+
+    def take(self, st, step, checkpoint, flush):
+        """Keep this output's errors and parts (copies: the state moves on); with ``flush`` (always
+        with ``checkpoint``), take the batch."""
+        t0 = time.perf_counter()
+        lo, hi = self.block
+        h = self.scene.h
+        mine = (st.q, st.p, st.Lam / h, st.live)
+        parts = []
+        for _, rows in self.scene.sample_sets:
+            a, b = max(lo, rows.start), min(hi, rows.stop)
+            parts.append(tuple(np.array(x[max(a - lo, 0):max(b - lo, 0)]) for x in mine))
+        flush = flush or checkpoint
+        if checkpoint:           # a batch's last output: sent or written before the state moves
+            piece = st.checkpoint()
+        else:                    # what rows need of the points (breakdown times only at a batch's end)
+            piece = ({"breakdown_time": st.breakdown_time.copy()} if flush else {}) | \
+                ({"q": st.q.copy()} if self.scene.store_points else {})
+        self.held.append(_Output(step, checkpoint, self.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
+        self.clock["invariants"] += time.perf_counter() - t0
+        if flush:
+            self.flush()
+
+    def flush(self):
+        """Take the held outputs: gathers, tasks, the pieces to rank 0, and there the rows."""
+        comm, scene, rank = self.comm, self.scene, self.comm.rank
+        t0 = time.perf_counter()
+        held, wait, gathered = self.held, 0.0, {}
+        for k, (spec, _) in enumerate(scene.sample_sets):   # every gather first: then the ranks work at once
+            for owner in sorted({r for (inv, _), r in self.tasks.items() if inv == spec.invariant}):
+                w0 = time.perf_counter()
+                parts = comm.gather([x.parts[k] for x in held], root=owner)
+                wait += time.perf_counter() - w0
+                if rank == owner:
+                    gathered[k] = parts              # parts[r][i]: rank r's part at the batch's i-th output
+        values = [{} for _ in held]
+        for k, parts in gathered.items():
+            spec = scene.sample_sets[k][0]
+            forms = [fm for fm in scene.forms if self.tasks[(spec.invariant, fm)] == rank]
+            for i, v in enumerate(values):
+                q, p, lam, live = (np.concatenate([r[i][c] for r in parts]) for c in range(4))
+                shp = spec.grid + (q.shape[1],)
+                v.update(self.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
+                                                     live))
+        mine = [(x.errors, v, x.piece) for x, v in zip(held, values)]
+        t1 = time.perf_counter()
+        if rank != 0:            # pickled at once: the state may move on while the message travels
+            self.send(mine)
+        else:
+            batches = [mine] + [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
+        t2 = time.perf_counter()
+        self.clock["invariants"] += t1 - t0 - wait
+        self.clock["gather"] += wait + t2 - t1
+        self.held = []
+        if rank == 0:
+            self.write(held, batches)
+
+    def write(self, held, batches):
+        """Rank 0: the batch's rows from every rank's (errors, values, piece) at each output, written
+        together and flushed; the breakdown times when they changed, the state at a checkpoint."""
+        scene, t0 = self.scene, time.perf_counter()
+        rows = []
+        for i, x in enumerate(held):
+            parts = [b[i] for b in batches]
+            rows.append(self.diagnostics.combine(x.step * scene.h, [p[0] for p in parts],
+                                                 {k: v for p in parts for k, v in p[1].items()}))
+            if scene.store_points:
+                q = np.concatenate([p[2]["q"] for p in parts])
+                for spec, sl in scene.sample_sets:
+                    rows[-1][f"points/{spec.name}"] = q[sl].reshape(spec.grid + (q.shape[1],))
+        last = held[-1]
+        full = _concat([b[-1][2] for b in batches])
+        bt = full["breakdown_time"]
+        changed = self.breakdown_written is None or not np.array_equal(bt, self.breakdown_written)
+        t1 = time.perf_counter()
+        output.wall_clock(self.g, self.wall())
+        output.write_rows(self.f, self.g, last.step, rows, bt if changed else None, full if last.checkpoint else None)
+        self.breakdown_written = bt
+        self.clock["invariants"] += t1 - t0
+        self.clock["hdf5"] += time.perf_counter() - t1
+        if self.after_output is not None:
+            for x in held:
+                self.after_output(self.name, x.step)
+
+    def send(self, payload):
+        """Hand a batch's pieces to rank 0 without waiting for it to take them (it may still be on
+        its own tasks or writing): the rank goes on advancing; the last batch's send is finished
+        first (by then rank 0 has received it)."""
+        self.finish_sending()
+        self.sending.append(self.comm.isend(payload, dest=0, tag=OUTPUT_TAG))
+
+    def finish_sending(self):
+        while self.sending:
+            self.sending.pop().wait()
 
 
 def finalize(path, scene):

@@ -26,9 +26,9 @@ Layout (format ``poincare/2``)::
     partial          some points broke down (their sets' invariants are NaN from then on)
     failed           every point broke down
 
-Every dataset grows by one row per output and the file is flushed after each output,
-so a run killed at any moment leaves a readable file with every output up to the
-last flush.  Every chunked dataset carries HDF5's fletcher32 checksum, so damaged bytes
+Every dataset grows by one row per output; the driver appends the rows of about two seconds
+of advancing together and flushes, so a run killed at any moment leaves a readable file with
+every output up to the last flush.  Every chunked dataset carries HDF5's fletcher32 checksum, so damaged bytes
 are reported on reading (:class:`DamagedFile`) instead of being plotted.  The file uses
 HDF5's default (earliest) format: the newer superblock keeps "open for writing" flags that
 a killed writer leaves set, after which plain readers refuse the file.
@@ -188,13 +188,13 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
                 c.create_dataset(name, shape=shape, dtype=dtype, chunks=True, fletcher32=True)
 
 
-def append(g, row: dict):
-    """Append one output row {dataset path: value} to the pair group g."""
-    for name, val in row.items():
+def append(g, rows: list):
+    """Append output rows [{dataset path: value}, ...] (the same keys) to the pair group g."""
+    for name in rows[0]:
         ds = g[name]
         n = ds.shape[0]
-        ds.resize(n + 1, axis=0)
-        ds[n] = val
+        ds.resize(n + len(rows), axis=0)
+        ds[n:] = np.stack([np.asarray(r[name]) for r in rows]).astype(ds.dtype, copy=False)
 
 
 def write_checkpoint(f, g, step, state: dict):
@@ -361,17 +361,18 @@ def restart_pair(f, name, output_every, finished_too=False):
     return step, state
 
 
-def write_output(f, g, step, row, breakdown_time=None, state=None):
-    """Append one output row; with ``breakdown_time`` (when it changed) the points' breakdown times,
-    and with ``state`` the checkpoint of the full integrator state at ``step`` (stage arrays padded to
-    the file's largest s).  Refuses, naming the last output written, when the disk cannot hold it."""
-    need = sum(np.asarray(v).nbytes for v in row.values())
+def write_rows(f, g, step, rows, breakdown_time=None, state=None):
+    """Append output rows (the last at ``step``) and flush; with ``breakdown_time`` (when it changed)
+    the points' breakdown times, and with ``state`` the checkpoint of the full integrator state at
+    ``step`` (stage arrays padded to the file's largest s).  Refuses, naming the last output
+    written, when the disk cannot hold it."""
+    need = sum(np.asarray(v).nbytes for row in rows for v in row.values())
     need += (0 if breakdown_time is None else breakdown_time.nbytes) + \
         (0 if state is None else sum(v.nbytes for v in state.values()))
     last = f"{g.name.rsplit('/', 1)[-1]} t = {g['t'][-1]:g}" if g["t"].shape[0] else \
         f"the pair before {g.name.rsplit('/', 1)[-1]}"
     ensure_space(f.filename, need, last)
-    append(g, row)
+    append(g, rows)
     if breakdown_time is not None:
         g["breakdown_time"][...] = breakdown_time
     if state is None:
