@@ -39,7 +39,7 @@ dozen numbers, a state about 300 bytes a point.  A checkpoint slot is first mark
 (step = −1), then written, then given its step; resume uses the newest valid slot, drops the rows
 written after it and computes them again.  Every output starts the next step from fresh Newton
 Jacobians, so a run resumed from any output is bitwise the uninterrupted one, and how often the
-state is written changes no result.
+state is written changes no result.  A finished pair keeps its final state in slot a, slot b empty.
 """
 from __future__ import annotations
 
@@ -385,9 +385,34 @@ def write_rows(f, g, step, rows, breakdown_time=None, state=None):
 
 
 def close_pair(g, n_outputs, threshold):
-    """The pair's status from its rows (see :func:`pair_summary`), written."""
+    """The pair's status from its rows (see :func:`pair_summary`), written; a finished pair's
+    checkpoint slots settled (:func:`settle_checkpoint`)."""
     status, _, _, unresolved = pair_summary(g, n_outputs, threshold)
     set_status(g, status, unresolved)
+    if status in FINISHED:
+        settle_checkpoint(g)
+
+
+def settle_checkpoint(g):
+    """Put a finished pair's final state in slot a and empty slot b (step −1, zeros), whichever slot
+    was written last.  Which states were written on the way depends on wall time (how fast the
+    outputs came); the finished file does not, so it is bitwise the same for any rank count.  At
+    every moment one valid slot holds the final state."""
+    a, b, f = g["checkpoint/a"], g["checkpoint/b"], g.file
+    if int(b["step"][()]) > int(a["step"][()]):
+        a["step"][()] = -1
+        f.flush()
+        for name in STATE_FIELDS:
+            a[name][...] = b[name][...]
+        f.flush()
+        a["step"][()] = int(b["step"][()])
+        f.flush()
+    b["step"][()] = -1
+    f.flush()
+    for name in STATE_FIELDS:
+        if b[name].id.get_storage_size() > 0:      # written once: zeros, as a slot never written reads
+            b[name][...] = 0
+    f.flush()
 
 
 def finish(path, names, n_outputs) -> list:
