@@ -10,16 +10,19 @@ measure:
      rank's phases (advance, gather, invariants, HDF5) and a bitwise comparison of the files;
   B. the cost of each invariant task (set, form) at the scene's size and at larger sizes (the
      exponent of its growth), and of the per-point diagnostics;
-  C. the cost of a gather of checkpoint-sized parts between 2 ranks (bytes per second) and of the
-     HDF5 write per byte (from A's HDF5 phase).
+  C. the rate of a pickled gather between 2 ranks (bytes per second) and the cost of writing one
+     checkpoint per byte (``--again costs`` measures B and C alone).
 
 predict: per pair, an output interval of k steps costs
     T = max((N·k·c + Σ_r W_r) / R, max_r W_r) + G(R),
 with c the pair's advance per point-step (A, one thread), W_r rank r's output work (its invariant
 tasks as :func:`integrators.service.diagnostics.assign` gives them, its points' diagnostics, and on
-rank 0 the HDF5 write) and G the gather of the checkpoint to rank 0 (bytes × (R − 1)/R / bandwidth).
-The balance of points against output work is what the driver's split does; the max is a rank whose
-output work alone exceeds an even share.  Validated against A's 1- and 2-rank walls.
+rank 0 the rows' HDF5 write) and G the sets' parts gathered to the busiest task owner (each set's
+q, p, λ and live flags, 97 bytes a point, × (R − 1)/R, over the gather rate).  On top, each pair
+writes its state 1 + ⌊pair time / 60 s⌋ times (output.checkpoint_seconds): 314 bytes a point
+gathered to rank 0 and written there.  The balance of points against output work is what the
+driver's split does; the max is a rank whose output work alone exceeds an even share.  Validated
+against A's 1- and 2-rank walls.
 """
 import argparse
 import json
@@ -96,9 +99,44 @@ def gather_cost(points=12000):
     return dict(bytes=int(nbytes), seconds=float(dt), bytes_per_second=int(nbytes) / float(dt))
 
 
+def write_cost(points=12000, repeat=5):
+    """Seconds a byte of one checkpoint of ``points`` points takes to write (as the driver does:
+    fletcher32 chunks, slot invalidated, written, validated, three flushes); median of ``repeat``."""
+    import h5py
+    from integrators import State
+    from integrators.service import output
+    schema = State.schema(points, 4, 3)
+    state = {k: np.ones(shape, dtype) for k, (shape, dtype) in schema.items()}
+    nbytes = sum(v.nbytes for v in state.values())
+    with tempfile.TemporaryDirectory() as tmp, h5py.File(Path(tmp) / "w.h5", "w") as f:
+        g = f.create_group("p")
+        for slot in ("a", "b"):
+            c = g.create_group(f"checkpoint/{slot}")
+            c.create_dataset("step", data=np.array(-1, dtype=np.int64))
+            for name, (shape, dtype) in schema.items():
+                c.create_dataset(name, shape=shape, dtype=dtype, chunks=True, fletcher32=True)
+        ts = []
+        for k in range(repeat):
+            t0 = time.perf_counter()
+            output.write_checkpoint(f, g, k, state)
+            ts.append(time.perf_counter() - t0)
+    return dict(bytes=nbytes, seconds=float(np.median(ts)), seconds_per_byte=float(np.median(ts)) / nbytes)
+
+
+def costs():
+    """B and C: the invariant tasks, the per-point diagnostics, the gather rate and the write rate."""
+    tasks, diag = task_costs()
+    return dict(tasks=tasks, diag_per_point=diag, gather=gather_cost(), write=write_cost())
+
+
 def measure(steps, hybrid=False, again=None):
     """Every run, the task costs and the gather rate; with ``again`` (a run label, e.g. '2x1') only
     that run, the rest of the file kept and its previous entry moved to 'earlier'."""
+    if again == "costs":
+        res = json.loads(OUT.read_text())
+        res.update(costs())
+        OUT.write_text(json.dumps(res, indent=1))
+        return
     if again:
         res = json.loads(OUT.read_text())
         res["earlier"] = res.get("earlier", []) + [{again: {"wall": res[again]["wall"],
@@ -126,8 +164,7 @@ def measure(steps, hybrid=False, again=None):
             differ, n = bs.identical_files(Path(tmp) / "1x1.h5", Path(tmp) / f"{other}.h5")
             res[f"datasets differing 1x1 vs {other}"] = [len(differ), n]
             print(other, "differ:", len(differ), "of", n, flush=True)
-    res["tasks"], res["diag_per_point"] = task_costs()
-    res["gather"] = gather_cost()
+    res.update(costs())
     if OUT.exists():          # earlier measurements stay in the file: wall, per-rank phases, command
         old = json.loads(OUT.read_text())
         keep = {k: {"wall": v["wall"], "per_rank": v.get("per_rank")} for k, v in old.items()
@@ -160,22 +197,31 @@ def lpt(costs, ranks):
     return load
 
 
+PART_BYTES = 3 * 8 * 4 + 1      # a sample point's q, p, λ (d = 4) and live flag, as the sets are gathered
+
+
 def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup):
     """Predicted wall [s] of the scene on ``ranks`` ranks × 1 thread."""
-    fits, diag, bw, write_per_byte, ck_bytes = (model[k] for k in ("fits", "diag", "bw", "write_per_byte",
-                                                                   "ck_bytes_per_point"))
+    fits, diag, bw, row_write, ck_write, ck_bytes = (
+        model[k] for k in ("fits", "diag", "bw", "row_write", "ck_write_per_byte", "ck_bytes_per_point"))
     n = n_loop + n_surf
-    costs = [fits[("I1", f)][0] * n_loop ** fits[("I1", f)][1] for f in FORMS] + \
-            [fits[("I2", f)][0] * n_surf ** fits[("I2", f)][1] for f in FORMS]
-    load = lpt(costs, ranks)
+    size = {"I1": n_loop, "I2": n_surf}
+    tasks = [(fits[(inv, f)][0] * size[inv] ** fits[(inv, f)][1], inv) for inv in ("I1", "I2") for f in FORMS]
+    load, received = np.zeros(ranks), [set() for _ in range(ranks)]
+    for cost, inv in sorted(tasks, reverse=True):        # as diagnostics.assign: longest first, least loaded
+        r = int(np.argmin(load))
+        load[r] += cost
+        received[r].add(inv)                              # a set's points go once to each rank with one of its tasks
     W = load + diag * n / ranks
-    W[0] += write_per_byte * ck_bytes * n
-    G = ck_bytes * n * (ranks - 1) / ranks / bw
+    W[0] += row_write
+    G = max(sum(size[inv] for inv in received[r]) for r in range(ranks)) * PART_BYTES * (ranks - 1) / ranks / bw
+    ck = ck_bytes * n * ((ranks - 1) / ranks / bw + ck_write)    # one checkpoint: to rank 0, then written
     outputs = steps // every
     total = startup
     for c in pair_costs:
         interval = max((n * every * c + W.sum()) / ranks, W.max()) + G
-        total += outputs * interval + W.max() + G        # the outputs, plus the one at t = 0
+        pair = outputs * interval + W.max() + G          # the outputs, plus the one at t = 0
+        total += pair + (1 + int(pair // 60.0)) * ck
     return total
 
 
@@ -187,8 +233,11 @@ def build_model(res):
     outputs = len(pair_costs) * (steps // every + 1)
     from integrators import State
     ck_bytes = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, 4, 3).values())
+    ck_write = res["write"]["seconds_per_byte"]
+    # the 1-rank run's HDF5 phase is its rows and one checkpoint a pair (every pair is under 60 s)
+    row_write = (one["phases"]["hdf5"] - len(pair_costs) * ck_write * ck_bytes * n) / outputs
     model = dict(fits=fit_tasks(res["tasks"]), diag=res["diag_per_point"], bw=res["gather"]["bytes_per_second"],
-                 write_per_byte=one["phases"]["hdf5"] / outputs / (ck_bytes * n), ck_bytes_per_point=ck_bytes)
+                 row_write=max(row_write, 0.0), ck_write_per_byte=ck_write, ck_bytes_per_point=ck_bytes)
     # start-up: what the 1-rank run spent outside its phases (imports, code generation, compile cache)
     ph = one["phases"]
     startup = one["wall"] - (ph["advance"] + ph["gather"] + ph["invariants"] + ph["hdf5"])
@@ -228,7 +277,7 @@ def predict(args):
     ax.loglog(rs, curve[0][1] / np.array([c[1] for c in curve]), "o-", label="paper scene (12,000 points)")
     ax.loglog(rs, curve[0][2] / np.array([c[2] for c in curve]), "s-", label="10⁶ points")
     ax.loglog(rs, rs, "k:", lw=0.8, label="ideal")
-    ax.plot([1, 2], [1, res["1x1"]["wall"] / res["2x1"]["wall"]], "r*", ms=10, label="measured (cut-down scene)")
+    ax.plot([1, 2], [1, res["1x1"]["wall"] / res["2x1"]["wall"]], "r*", ms=10, label="measured (paper scene, this file's 1x1 and 2x1)")
     ax.set_xlabel("ranks (1 thread each)")
     ax.set_ylabel("predicted speed-up")
     ax.legend(fontsize=8)
@@ -245,7 +294,8 @@ def main():
     ap.add_argument("what", choices=("measure", "predict"))
     ap.add_argument("--steps", type=int, default=1000, help="steps of the paper scene (its own: 1,000)")
     ap.add_argument("--hybrid", action="store_true", help="also 1 rank x 2 threads")
-    ap.add_argument("--again", help="measure only this run (e.g. 2x1) again, keeping the rest of the file")
+    ap.add_argument("--again", help="measure only this run (e.g. 2x1) again, or 'costs' (B and C), keeping the "
+                    "rest of the file")
     args = ap.parse_args()
     if args.what == "measure":
         measure(args.steps, args.hybrid, args.again)
