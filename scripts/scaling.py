@@ -277,7 +277,8 @@ def predict(args):
     ax.loglog(rs, curve[0][1] / np.array([c[1] for c in curve]), "o-", label="paper scene (12,000 points)")
     ax.loglog(rs, curve[0][2] / np.array([c[2] for c in curve]), "s-", label="10⁶ points")
     ax.loglog(rs, rs, "k:", lw=0.8, label="ideal")
-    ax.plot([1, 2], [1, res["1x1"]["wall"] / res["2x1"]["wall"]], "r*", ms=10, label="measured (paper scene, this file's 1x1 and 2x1)")
+    ax.plot([1, 2], [1, res["1x1"]["wall"] / res["2x1"]["wall"]], "r*", ms=10,
+            label="measured (paper scene, this file's 1x1 and 2x1)")
     ax.set_xlabel("ranks (1 thread each)")
     ax.set_ylabel("predicted speed-up")
     ax.legend(fontsize=8)
