@@ -339,17 +339,3 @@ def test_invariant_tasks_are_spread_over_the_ranks():
         assert np.count_nonzero(load) == min(size, 6)
         best_possible = max(load.sum() / size, max(COST_PER_POINT[k] * counts[k[0]] for k in a))
         assert load.max() <= 4 / 3 * best_possible
-
-
-def test_measured_task_seconds_go_to_the_rank_with_least_to_do():
-    """The driver gives a batch's tasks out by their measured seconds on top of each rank's predicted
-    advance: a rank that is 1 s behind gets no task while the other can take all 0.9 s of them, and
-    with even ranks the two largest tasks go to different ranks."""
-    from integrators.service.diagnostics import assign
-    scene = parse_scene(SMALL)
-    secs = {(inv, f): w for inv, ws in (("I1", (0.01, 0.02, 0.07)), ("I2", (0.2, 0.1, 0.5)))
-            for f, w in zip(("canonical", "noncanonical", "corrected"), ws)}
-    assert set(assign(scene, 2, [0.0, 1.0], secs).values()) == {0}
-    assert set(assign(scene, 2, [1.0, 0.0], secs).values()) == {1}
-    even = assign(scene, 2, [0.0, 0.0], secs)
-    assert even[("I2", "corrected")] != even[("I2", "canonical")]

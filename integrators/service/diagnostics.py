@@ -25,14 +25,13 @@ COST_PER_POINT = {("I1", "canonical"): 0.25, ("I1", "noncanonical"): 0.20, ("I1"
                   ("I2", "canonical"): 1.85, ("I2", "noncanonical"): 1.32, ("I2", "corrected"): 3.68}
 
 
-def assign(scene, size, busy=None, seconds=None) -> dict:
+def assign(scene, size, busy=None) -> dict:
     """{(invariant, form): rank}: every task of the scene's sets given to a rank, the longest first
-    to the least loaded.  ``busy[r]``: work rank r already has; ``seconds``: {(invariant, form): cost}
-    measured, in the same units as ``busy`` (without it, COST_PER_POINT × the set's points).
-    Deterministic: the same arguments give the same assignment on every rank."""
+    to the least loaded (``busy[r]``: work a rank already has, in the same units; rank 0 writes the
+    file).  Deterministic: the same scene and size give the same assignment."""
     load = np.zeros(size) if busy is None else np.array(busy, dtype=float)
-    tasks = [((seconds or {}).get((spec.invariant, form), COST_PER_POINT[(spec.invariant, form)] * spec.count),
-              spec.invariant, form) for spec, _ in scene.sample_sets for form in scene.forms]
+    tasks = [(COST_PER_POINT[(spec.invariant, form)] * spec.count, spec.invariant, form)
+             for spec, _ in scene.sample_sets for form in scene.forms]
     out = {}
     for cost, inv, form in sorted(tasks, key=lambda t: (-t[0], t[1], t[2])):
         r = int(np.argmin(load))

@@ -146,7 +146,6 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     q0 = scene.points(system)
     n = q0.shape[0]
     offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
-    estimates = {}                 # seconds of each invariant task an output, measured along the run
 
     f = None
     todo = []
@@ -179,7 +178,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 continue
             _check_stop()
             offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed,
-                                       after_output, bar, timings, UNDER_RESOLVED, estimates)
+                                       after_output, bar, timings, UNDER_RESOLVED)
         comm.Barrier()
     except output.OutputError:
         if f is not None:
@@ -215,7 +214,7 @@ def _close_quietly(f):
 
 
 def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, after_output, bar, timings,
-              threshold, estimates):
+              threshold):
     """Advance one pair from its start (or checkpoint) to scene.steps, writing every output; rank 0
     writes the pair's status when it finishes.  Returns the next pair's (offload, speed)."""
     rank, size = comm.rank, comm.size
@@ -238,7 +237,7 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
     t_start = time.perf_counter()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
     out = _Outputs(comm, scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size), f, g,
-                   clock, after_output, name, lambda: wall0 + time.perf_counter() - t_start, estimates=estimates)
+                   clock, after_output, name, lambda: wall0 + time.perf_counter() - t_start)
     if start_step == 0:
         out.take(st, 0, checkpoint=False, flush=False)
 
@@ -318,13 +317,9 @@ class _Outputs:
     The outputs are taken in batches (:func:`_batch`: about two seconds of advancing; a batch also
     ends at a checkpoint and at the pair's last output), so the ranks meet once a batch, not at
     every output, and what one rank's advance gains or loses on the other's in one interval evens
-    out over the batch.  At a batch's end the invariant tasks are given out again (:func:`assign`),
-    the longest first to the rank with the least to do before the next batch: its advance over the
-    last interval, the write on rank 0, and the tasks' measured seconds, shared by every rank so
-    that all of them compute the same assignment.  The sets' parts are gathered to the ranks that
-    hold one of the set's tasks, the tasks run, the other ranks hand their pieces to rank 0 without
-    waiting for it (:meth:`send`), and rank 0 appends the rows and flushes.  A task is the same
-    function of the same points on any rank, so the assignment changes no bits.
+    out over the batch.  At a batch's end the sets' parts are gathered to the ranks that hold one
+    of the set's tasks, the tasks run, the other ranks hand their pieces to rank 0 without waiting
+    for it (:meth:`send`), and rank 0 writes the rows in order, each flushed.
     """
 
     comm: object
@@ -343,10 +338,6 @@ class _Outputs:
     held: list = dataclasses.field(default_factory=list)
     sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
     breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
-    estimates: dict = dataclasses.field(default_factory=dict)  # {(invariant, form): seconds an output}, every rank
-    task_seconds: dict = dataclasses.field(default_factory=dict)   # what this rank measured in its last batch
-    since: float = dataclasses.field(default_factory=time.perf_counter)   # when this rank's last batch ended
-    write_seconds: float = 0.0                                # rank 0: its last batch's HDF5 write
 
     def take(self, st, step, checkpoint, flush):
         """Keep this output's errors and parts (copies: the state moves on); with ``flush`` (always
@@ -375,19 +366,6 @@ class _Outputs:
         comm, scene, rank = self.comm, self.scene, self.comm.rank
         t0 = time.perf_counter()
         held, wait, gathered = self.held, 0.0, {}
-        if comm.size > 1:        # this batch's tasks: to the ranks that advanced fastest since the last one
-            # what a rank will be busy with before the next batch besides its tasks, predicted from the
-            # last interval: its advance (and on rank 0 the write); the least busy get the longest tasks
-            busy = t0 - self.since + self.write_seconds
-            w0 = time.perf_counter()
-            shared = comm.allgather((busy, self.task_seconds))
-            wait += time.perf_counter() - w0
-            for _, measured in shared:        # every rank merges the same list: the same numbers everywhere
-                self.estimates.update(measured)
-            if len(self.estimates) == len(self.tasks):
-                self.tasks = assign(scene, comm.size, [b for b, _ in shared],
-                                    {k: v * len(held) for k, v in self.estimates.items()})
-        self.task_seconds = {}
         for k, (spec, _) in enumerate(scene.sample_sets):   # every gather first: then the ranks work at once
             for owner in sorted({r for (inv, _), r in self.tasks.items() if inv == spec.invariant}):
                 w0 = time.perf_counter()
@@ -399,14 +377,11 @@ class _Outputs:
         for k, parts in gathered.items():
             spec = scene.sample_sets[k][0]
             forms = [fm for fm in scene.forms if self.tasks[(spec.invariant, fm)] == rank]
-            for form in forms:
-                s0 = time.perf_counter()
-                for i, v in enumerate(values):
-                    q, p, lam, live = (np.concatenate([r[i][c] for r in parts]) for c in range(4))
-                    shp = spec.grid + (q.shape[1],)
-                    v.update(self.diagnostics.set_values(spec, [form], q.reshape(shp), p.reshape(shp),
-                                                         lam.reshape(shp), live))
-                self.task_seconds[(spec.invariant, form)] = (time.perf_counter() - s0) / len(values)
+            for i, v in enumerate(values):
+                q, p, lam, live = (np.concatenate([r[i][c] for r in parts]) for c in range(4))
+                shp = spec.grid + (q.shape[1],)
+                v.update(self.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
+                                                     live))
         mine = [(x.errors, v, x.piece) for x, v in zip(held, values)]
         t1 = time.perf_counter()
         if rank != 0:            # pickled at once: the state may move on while the message travels
@@ -418,10 +393,7 @@ class _Outputs:
         self.clock["gather"] += wait + t2 - t1
         self.held = []
         if rank == 0:
-            w0 = time.perf_counter()
             self.write(held, batches)
-            self.write_seconds = time.perf_counter() - w0
-        self.since = time.perf_counter()
 
     def write(self, held, batches):
         """Rank 0: the batch's rows from every rank's (errors, values, piece) at each output, written
