@@ -89,8 +89,7 @@ def child(scene_path, out, threads=None):
                 for k, v in c.items():
                     per_rank[r][k] = per_rank[r].get(k, 0) + v
         print(json.dumps(dict(wall=wall, ranks=comm.size, threads=threads, peak_rss_mib=rss_all, phases=phases,
-                              per_rank=per_rank, pairs={s.pair: {k: v for k, v in s.timings.items() if k != "per_rank"}
-                                                        for s in summaries})))
+                              per_rank=per_rank, pairs={s.pair: s.timings for s in summaries})))
 
 
 def _command(text, ranks, tmp, out_name, threads=None):

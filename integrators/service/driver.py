@@ -391,6 +391,9 @@ class _Outputs:
         t2 = time.perf_counter()
         self.clock["invariants"] += t1 - t0 - wait
         self.clock["gather"] += wait + t2 - t1
+        self.clock["wait_gather"] = self.clock.get("wait_gather", 0.0) + wait      # of which at the sets' gathers
+        self.clock["wait_recv"] = self.clock.get("wait_recv", 0.0) + t2 - t1       # ... and handing pieces to rank 0
+        self.clock["meetings"] = self.clock.get("meetings", 0) + 1
         self.held = []
         if rank == 0:
             self.write(held, batches)
