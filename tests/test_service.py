@@ -210,51 +210,6 @@ def test_results_are_bitwise_identical_for_1_2_3_4_and_8_ranks(tmp_path):
         assert same(files[1], files[n]), n
 
 
-MOVES = """
-import sys
-import numpy as np
-from integrators.service import driver, ranks
-from integrators.service.scene import load_scene
-calls = [0]
-
-def shuffled(blocks, stats, outputs):          # rank 0: new random sizes at every meeting
-    calls[0] += 1
-    rng = np.random.default_rng(calls[0])
-    n, size = blocks[-1][1], len(blocks)
-    cuts = np.sort(rng.integers(0, n + 1, size - 1))
-    if calls[0] % 4 == 0:
-        cuts[0] = 0                            # rank 0 without points
-    if calls[0] % 4 == 2:
-        cuts[:] = cuts[0]                      # rank 1 without points
-    return [(int(a), int(b)) for a, b in zip(np.r_[0, cuts], np.r_[cuts, n])]
-
-driver._resized = shuffled
-driver._batch = lambda seconds_per_output, points: 2
-comm = ranks.communicator()
-driver.run(load_scene(sys.argv[1]), sys.argv[2], progress=False, comm=comm)
-print("meetings", comm.allreduce(calls[0]))
-"""
-
-
-@pytest.mark.mpi
-def test_points_that_change_rank_at_every_meeting_give_the_same_bits(tmp_path):
-    """The ranks' blocks are resized at every batch of 2 outputs to random sizes (at every other
-    meeting rank 0 or rank 1 is left without points), so points move between 3 ranks with their state 4 times a pair: the file is
-    the one-rank run's, bit for bit, checkpoints included."""
-    scene = tmp_path / "small.toml"
-    scene.write_text(SMALL)
-    script = tmp_path / "moves.py"
-    script.write_text(MOVES)
-    one = tmp_path / "one.h5"
-    assert poincare("run", str(scene), "-o", str(one), "-q").returncode == 0
-    mpiexec = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
-    r = subprocess.run([mpiexec, "-n", "3", sys.executable, str(script), str(scene), str(tmp_path / "three.h5")],
-                       capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    assert "meetings 24" in r.stdout          # 6 pairs × 4 meetings before each pair's last batch
-    assert same(dump(one), dump(tmp_path / "three.h5"))
-
-
 def test_kill_and_resume_gives_the_same_bits(tmp_path):
     scene = tmp_path / "small.toml"
     scene.write_text(edit(SMALL, "steps = 40", "steps = 500"))
@@ -365,44 +320,6 @@ def test_split_by_measured_speed_makes_every_rank_finish_together():
         assert sizes.sum() == 20000 and np.ptp(c * sizes + S) <= 2 * c.max() + 1e-12
     # a wildly slow measurement counts as half the median speed, not less
     assert _split(9000, 3, 0.0, [1.0, 1.0, 1e-6]) == _split(9000, 3, 0.0, [1.0, 1.0, 0.5])
-
-
-def test_points_are_dealt_so_that_every_rank_holds_a_fair_sample():
-    """Each rank's block of the dealt order holds every kind of point in proportion: the paper
-    scene's 2,000 loop points and 10,000 surface points (rows 0-99 a hundred points each) split
-    5,000 / 7,000 give each rank its share of the loop and of every tenth of the surface to within
-    a few standard deviations of drawing without replacement (contiguous blocks would give rank 0
-    all of the loop).  On one rank the order is the identity."""
-    from integrators.service.ranks import _split, deal, owned
-    n, loop = 12000, 2000
-    order = deal(n, 2)
-    assert np.array_equal(np.sort(order), np.arange(n)) and np.array_equal(deal(n, 1), np.arange(n))
-    blocks = _split(n, 2, 0.0, [5.0, 7.0])
-    points = owned(order, blocks)
-    assert [p.size for p in points] == [5000, 7000]
-    assert np.array_equal(np.sort(np.concatenate(points)), np.arange(n))      # every point once
-    assert all(np.all(np.diff(p) > 0) for p in points)
-    for p in points:
-        share = p.size / n
-        kinds = [(p < loop).sum()] + [((p >= lo) & (p < lo + 1000)).sum() for lo in range(loop, n, 1000)]
-        expect = np.array([loop] + [1000] * 10) * share
-        sd = np.sqrt(expect * (1 - share) * (1 - share))
-        assert np.all(np.abs(kinds - expect) < 4 * sd + 1), (kinds, expect)
-
-
-def test_blocks_are_resized_when_a_rank_runs_slower_and_the_move_pays():
-    from integrators.service.ranks import _resized
-    blocks = [(0, 6000), (6000, 12000)]
-    # rank 1 advanced its 6,000 points 20 % slower per output; moving costs 1e-7 s a point
-    stats = [(0.10, 6000, 0.01, 1e-7), (0.12, 6000, 0.0, 1e-7)]
-    new = _resized(blocks, stats, outputs=10)
-    sizes = np.array([hi - lo for lo, hi in new])
-    assert new[0][0] == 0 and new[-1][1] == 12000 and sizes[0] > 6000
-    c = np.array([0.10, 0.12]) / 6000
-    assert np.ptp(c * sizes + [0.01, 0.0]) <= 2 * c.max()            # they would now meet together
-    # a 0.1 % difference does not pay for moving a whole rank's state
-    assert _resized(blocks, [(0.100, 6000, 0.0, 1e-6), (0.1001, 6000, 0.0, 1e-6)], outputs=10) == blocks
-    assert _resized(blocks, [(0.1, 6000, 0.0, 1e-7), (0.0, 6000, 0.0, 1e-7)], outputs=10) == blocks   # no measurement
 
 
 def test_invariant_tasks_are_spread_over_the_ranks():

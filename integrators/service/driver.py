@@ -1,9 +1,8 @@
 """The batch-run driver: every (tableau, projection) pair of a scene, distributed over MPI ranks.
 
-The sample points (loop first, then the surface row by row) are dealt to the ranks in a fixed
-shuffled order, so that each rank holds a fair sample of them (``ranks.deal``); from the second pair
-on, the ranks' shares are sized from each rank's measured advance rate and rank 0's is smaller by
-the cost of its output work (see ``_split``).  Each rank
+The sample points (loop first, then the surface row by row) are split into contiguous
+blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
+advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank
 advances its block with each pair.  At every output each rank keeps the per-point errors of its
 points and its part of each sample set; once a batch of outputs (about two seconds of advancing,
 ``_Outputs``) the sets' parts are gathered to the ranks that were given their invariant tasks, the
@@ -26,7 +25,7 @@ import numpy as np
 from . import output
 from ..engine import Engine, MapEngine, State, march, set_threads
 from .diagnostics import Diagnostics, assign
-from .ranks import _resized, _split, communicator, deal, default_threads, move, owned
+from .ranks import _balance, _split, communicator, default_threads
 
 
 STOP = []      # exceptions left by a signal handler (integrators.service.cli); raised before the next step
@@ -71,6 +70,10 @@ class Progress:
         if self.done >= self.total:
             sys.stderr.write("\n")
         sys.stderr.flush()
+
+
+def _concat(parts):
+    return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
 
 
 def _check_output(path, resume, force):
@@ -142,8 +145,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     system = scene.system()
     q0 = scene.points(system)
     n = q0.shape[0]
-    order = comm.bcast(deal(n, comm.size) if rank == 0 else None, root=0)
-    blocks = _split(n, comm.size)       # resized as the ranks meet, from their measured advance and output work
+    offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
 
     f = None
     todo = []
@@ -175,8 +177,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             if job is None:
                 continue
             _check_stop()
-            blocks = _run_pair(comm, f, scene, system, q0, order, blocks, tab_name, proj, job, after_output, bar,
-                               timings, UNDER_RESOLVED)
+            offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed,
+                                       after_output, bar, timings, UNDER_RESOLVED)
         comm.Barrier()
     except output.OutputError:
         if f is not None:
@@ -211,30 +213,30 @@ def _close_quietly(f):
         pass
 
 
-def _run_pair(comm, f, scene, system, q0, order, blocks, tab_name, proj, job, after_output, bar, timings,
+def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, after_output, bar, timings,
               threshold):
     """Advance one pair from its start (or checkpoint) to scene.steps, writing every output; rank 0
-    writes the pair's status when it finishes.  ``blocks``: the ranks' shares of the dealt ``order``
-    to start with; returns them as the pair left them."""
+    writes the pair's status when it finishes.  Returns the next pair's (offload, speed)."""
     rank, size = comm.rank, comm.size
-    h = scene.h
+    n, h = q0.shape[0], scene.h
     name = output.pair_name(tab_name, proj)
     start_step, saved = job
     if proj == "map":                          # a user's step map (run.step_maps)
         engine, s_tab = MapEngine(scene.step_map(tab_name), system, h, tab_name), 1
     else:
         engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
-    mine = owned(order, blocks)[rank]
+    blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
+    lo, hi = blocks[rank]
     if saved is None:
-        st = engine.state(q0[mine])
+        st = engine.state(q0[lo:hi])
     else:
         saved = comm.bcast(saved if rank == 0 else None, root=0)
-        st = State.from_checkpoint({k: v[mine] for k, v in _unpad(saved, s_tab).items()}, h)
+        st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
     g = output.pair_group(f, name) if rank == 0 else None
     wall0 = output.wall_clock(g) if rank == 0 else 0.0
     t_start = time.perf_counter()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
-    out = _Outputs(comm, scene, Diagnostics(scene, system, q0[mine]), q0, order, blocks, assign(scene, size), f, g,
+    out = _Outputs(comm, scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size), f, g,
                    clock, after_output, name, lambda: wall0 + time.perf_counter() - t_start)
     if start_step == 0:
         out.take(st, 0, checkpoint=False, flush=False)
@@ -244,7 +246,7 @@ def _run_pair(comm, f, scene, system, q0, order, blocks, tab_name, proj, job, af
         if j == 1:        # rank 0's first interval sets the batches of outputs and how often the state is written
             w0 = time.perf_counter()
             out.batch, out.cadence = comm.bcast(
-                (_batch(w0 - t_start, mine.size), _cadence(w0 - t_start, scene.checkpoint_seconds))
+                (_batch(w0 - t_start, hi - lo), _cadence(w0 - t_start, scene.checkpoint_seconds))
                 if rank == 0 else None, root=0)
             clock["gather"] += time.perf_counter() - w0
         last = step == scene.steps
@@ -261,13 +263,15 @@ def _run_pair(comm, f, scene, system, q0, order, blocks, tab_name, proj, job, af
                               _check_stop)
     out.finish_sending()
     timings[name] = clock
-    clocks = comm.gather(dict(clock, points=out.layout.points[rank].size), root=0)
-    if rank == 0:
-        clock["per_rank"] = clocks             # every rank's phases, for the cost model (scripts/scaling.py)
-        output.wall_clock(g, wall0 + time.perf_counter() - t_start)
-        output.close_pair(g, scene.n_outputs, threshold)
-        f.flush()
-    return out.blocks
+    clocks = comm.gather(dict(clock, points=hi - lo), root=0)
+    if rank != 0:
+        return offload, speed
+    clock["per_rank"] = clocks                 # every rank's phases, for the cost model (scripts/scaling.py)
+    stats = [(c["advance"], c["points"], c["invariants"] + c["hdf5"]) for c in clocks]
+    output.wall_clock(g, wall0 + time.perf_counter() - t_start)
+    output.close_pair(g, scene.n_outputs, threshold)
+    f.flush()
+    return _balance(stats)
 
 
 def _unpad(state, s):
@@ -321,9 +325,7 @@ class _Outputs:
     comm: object
     scene: object
     diagnostics: Diagnostics
-    q0: np.ndarray                  # every point's start (for the diagnostics of points that change rank)
-    order: np.ndarray               # the dealt order of the points (ranks.deal)
-    blocks: list                    # [(lo, hi)]: each rank's share of it, resized as the ranks meet
+    block: tuple                    # (lo, hi): the rows this rank advances
     tasks: dict                     # {(invariant, form): rank}, the same on every rank
     f: object                       # rank 0: the file and the pair's group
     g: object
@@ -337,17 +339,17 @@ class _Outputs:
     sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
     breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
 
-    def __post_init__(self):
-        self.layout = _Layout(self.scene, owned(self.order, self.blocks))
-        self.mark = (time.perf_counter(), 0.0, 0.0)     # at the last meeting: time, output seconds, work seconds
-        self.move_cost = 1e-7                           # seconds a point to move (and rebuild the state), measured
-
     def take(self, st, step, checkpoint, flush):
         """Keep this output's errors and parts (copies: the state moves on); with ``flush`` (always
         with ``checkpoint``), take the batch."""
         t0 = time.perf_counter()
-        mine = (st.q, st.p, st.Lam / self.scene.h, st.live)
-        parts = [tuple(x[ws[self.comm.rank]] for x in mine) for ws in self.layout.within]
+        lo, hi = self.block
+        h = self.scene.h
+        mine = (st.q, st.p, st.Lam / h, st.live)
+        parts = []
+        for _, rows in self.scene.sample_sets:
+            a, b = max(lo, rows.start), min(hi, rows.stop)
+            parts.append(tuple(np.array(x[max(a - lo, 0):max(b - lo, 0)]) for x in mine))
         flush = flush or checkpoint
         if checkpoint:           # a batch's last output: sent or written before the state moves
             piece = st.checkpoint()
@@ -357,41 +359,13 @@ class _Outputs:
         self.held.append(_Output(step, checkpoint, self.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
         self.clock["invariants"] += time.perf_counter() - t0
         if flush:
-            self.flush(st)
+            self.flush()
 
-    def rebalance(self, st):
-        """At a batch's end, where the ranks meet: rank 0 resizes their blocks (:func:`ranks._resized`)
-        from each rank's advance and output work per output since the last meeting, so that they
-        would have met together, and the points that change rank move with their state
-        (:func:`ranks.move`).  The machine's cores do not run equally fast from minute to minute:
-        on the paper scene, the same fair sample of points advanced up to 9 % slower on one rank
-        than on the other over a whole pair."""
-        comm, clock, t0 = self.comm, self.clock, time.perf_counter()
-        spent, work = clock["invariants"] + clock["hdf5"] + clock["gather"], clock["invariants"] + clock["hdf5"]
-        k = max(len(self.held), 1)
-        mine = ((t0 - self.mark[0] - (spent - self.mark[1])) / k, self.layout.points[comm.rank].size,
-                (work - self.mark[2]) / k, self.move_cost)
-        stats = comm.gather(mine, root=0)
-        new = comm.bcast(_resized(self.blocks, stats, self.batch) if comm.rank == 0 else None, root=0)
-        if new != self.blocks:
-            m0 = time.perf_counter()
-            points = move(comm, st, self.order, self.blocks, new, self.scene.h)
-            self.move_cost = (time.perf_counter() - m0) / max(points.size, 1)
-            self.diagnostics = Diagnostics(self.scene, self.diagnostics.system, self.q0[points])
-            self.blocks, self.layout = new, _Layout(self.scene, owned(self.order, new))
-            clock["moved"] = clock.get("moved", 0) + 1
-        clock["gather"] += time.perf_counter() - t0
-        self.mark = (time.perf_counter(), spent + time.perf_counter() - t0, work)
-
-    def flush(self, st):
-        """Take the held outputs: gathers, tasks, the pieces to rank 0, and there the rows; then the
-        ranks' blocks are resized for the next batch."""
+    def flush(self):
+        """Take the held outputs: gathers, tasks, the pieces to rank 0, and there the rows."""
         comm, scene, rank = self.comm, self.scene, self.comm.rank
-        held, layout = self.held, self.layout      # the held outputs' layout (a rebalance makes the next batch's)
-        if comm.size > 1 and held[-1].step < scene.steps:
-            self.rebalance(st)
         t0 = time.perf_counter()
-        wait, gathered = 0.0, {}
+        held, wait, gathered = self.held, 0.0, {}
         for k, (spec, _) in enumerate(scene.sample_sets):   # every gather first: then the ranks work at once
             for owner in sorted({r for (inv, _), r in self.tasks.items() if inv == spec.invariant}):
                 w0 = time.perf_counter()
@@ -404,7 +378,7 @@ class _Outputs:
             spec = scene.sample_sets[k][0]
             forms = [fm for fm in scene.forms if self.tasks[(spec.invariant, fm)] == rank]
             for i, v in enumerate(values):
-                q, p, lam, live = (_place([r[i][c] for r in parts], layout.at[k], spec.count) for c in range(4))
+                q, p, lam, live = (np.concatenate([r[i][c] for r in parts]) for c in range(4))
                 shp = spec.grid + (q.shape[1],)
                 v.update(self.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
                                                      live))
@@ -422,9 +396,9 @@ class _Outputs:
         self.clock["meetings"] = self.clock.get("meetings", 0) + 1
         self.held = []
         if rank == 0:
-            self.write(held, batches, layout.points)
+            self.write(held, batches)
 
-    def write(self, held, batches, points):
+    def write(self, held, batches):
         """Rank 0: the batch's rows from every rank's (errors, values, piece) at each output, written
         together and flushed; the breakdown times when they changed, the state at a checkpoint."""
         scene, t0 = self.scene, time.perf_counter()
@@ -434,12 +408,11 @@ class _Outputs:
             rows.append(self.diagnostics.combine(x.step * scene.h, [p[0] for p in parts],
                                                  {k: v for p in parts for k, v in p[1].items()}))
             if scene.store_points:
-                q = _place([p[2]["q"] for p in parts], points, scene.n_points)
+                q = np.concatenate([p[2]["q"] for p in parts])
                 for spec, sl in scene.sample_sets:
                     rows[-1][f"points/{spec.name}"] = q[sl].reshape(spec.grid + (q.shape[1],))
         last = held[-1]
-        full = {key: _place([b[-1][2][key] for b in batches], points, scene.n_points)
-                for key in batches[0][-1][2]}
+        full = _concat([b[-1][2] for b in batches])
         bt = full["breakdown_time"]
         changed = self.breakdown_written is None or not np.array_equal(bt, self.breakdown_written)
         t1 = time.perf_counter()
@@ -462,25 +435,6 @@ class _Outputs:
     def finish_sending(self):
         while self.sending:
             self.sending.pop().wait()
-
-
-class _Layout:
-    """Where each rank's points are: ``points[r]`` rank r's points (increasing indices into the
-    run's points); ``within[k][r]`` which of them are in sample set k, ``at[k][r]`` where they go in it."""
-
-    def __init__(self, scene, points):
-        self.points = points
-        sets = scene.sample_sets
-        self.within = [[np.flatnonzero((pts >= rows.start) & (pts < rows.stop)) for pts in points] for _, rows in sets]
-        self.at = [[pts[w] - rows.start for pts, w in zip(points, ws)] for (_, rows), ws in zip(sets, self.within)]
-
-
-def _place(parts, at, n):
-    """The n rows of which rank r holds ``parts[r]``, at rows ``at[r]``."""
-    out = np.empty((n,) + parts[0].shape[1:], parts[0].dtype)
-    for part, rows in zip(parts, at):
-        out[rows] = part
-    return out
 
 
 def finalize(path, scene):
