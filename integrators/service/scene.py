@@ -73,6 +73,9 @@ DIAGNOSTICS = ("energy", "momentum", "constraint")
 SCENE_DIR = Path(__file__).parent / "scenes"
 
 
+CHECKPOINT_SECONDS = 60.0          # default of output.checkpoint_seconds
+
+
 class SceneError(ValueError):
     """A scene that cannot run; the message names the offending key."""
 
@@ -146,7 +149,7 @@ class Scene:
     store_points: bool
     output: str
     text: str
-    checkpoint_seconds: float = 60.0  # wall time between checkpoints (0: every output); results do not depend on it
+    checkpoint_seconds: float = CHECKPOINT_SECONDS  # wall time between checkpoints (0: every output); results do not depend on it
     base: str | None = None          # directory of the scene file: where a relative file.py:function is looked up
     system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
@@ -366,7 +369,7 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
                 raise SceneError(f"run: {why}")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
     out = data.get("output", {}).get("path", f"{name}.h5")
-    ck_seconds = float(data.get("output", {}).get("checkpoint_seconds", 60.0))
+    ck_seconds = float(data.get("output", {}).get("checkpoint_seconds", CHECKPOINT_SECONDS))
     if not (math.isfinite(ck_seconds) and ck_seconds >= 0):
         raise SceneError(f"output.checkpoint_seconds must be a finite number ≥ 0, got {ck_seconds!r}")
     scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
