@@ -4,14 +4,14 @@ The sample points (loop first, then the surface row by row) are split into conti
 blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
 advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank
 advances its block with each pair.  At every output each rank keeps the per-point errors of its
-points and its part of each sample set; once a batch of outputs (about two seconds of advancing,
-``_Outputs``) the sets' parts are gathered to the ranks that were given their invariant tasks, the
-tasks run there, and the other ranks hand their pieces to rank 0 without waiting for it, which
-appends the rows to the HDF5 file (see :mod:`integrators.service.output`); about every
-``output.checkpoint_seconds`` and at a pair's end the full integrator state comes with them, as a
-checkpoint.  Because a point's trajectory does not depend on its batch,
-the file's numbers are bitwise the same for any number of ranks.  Without mpiexec
-(or without mpi4py) it runs as a single process.
+points and its part of each sample set; once a batch of outputs (about two seconds of advancing)
+it sends the sets' parts to the ranks that were given their invariant tasks and goes on, without
+waiting for anyone (``_Stream``).  A task owner runs a batch's tasks once the parts have arrived,
+and every rank sends its pieces to rank 0, which appends the rows to the HDF5 file in order (see
+:mod:`integrators.service.output`); about every ``output.checkpoint_seconds`` and at a pair's end
+the full integrator state comes with them, as a checkpoint.  Because a point's trajectory does
+not depend on its batch, the file's numbers are bitwise the same for any number of ranks.
+Without mpiexec (or without mpi4py) it runs as a single process.
 """
 from __future__ import annotations
 
@@ -145,7 +145,6 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     system = scene.system()
     q0 = scene.points(system)
     n = q0.shape[0]
-    offload, speed = 0.0, None     # rebalanced after every pair from the measured advance and output work
 
     f = None
     todo = []
@@ -173,12 +172,18 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
     try:
-        for (tab_name, proj), job in zip(scene.pairs, todo):
-            if job is None:
-                continue
+        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED)
+        jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, todo) if job is not None]
+        for i, (tab_name, proj, job) in enumerate(jobs):
             _check_stop()
-            offload, speed = _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed,
-                                       after_output, bar, timings, UNDER_RESOLVED)
+            _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, i == 0, i + 1 < len(jobs), bar)
+        w0 = time.perf_counter()
+        stream.drain()
+        ends = comm.gather(time.perf_counter() - w0, root=0)
+        if rank == 0 and jobs:               # what each rank spent finishing the last batches, with the last pair
+            last = timings[output.pair_name(*jobs[-1][:2])]
+            for c, s in zip(last["per_rank"], ends):
+                c["wait_end"] = s
         comm.Barrier()
     except output.OutputError:
         if f is not None:
@@ -213,10 +218,9 @@ def _close_quietly(f):
         pass
 
 
-def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, after_output, bar, timings,
-              threshold):
-    """Advance one pair from its start (or checkpoint) to scene.steps, writing every output; rank 0
-    writes the pair's status when it finishes.  Returns the next pair's (offload, speed)."""
+def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_next, bar):
+    """Advance one pair on this rank from its start (or checkpoint) to scene.steps, handing each
+    batch of outputs to ``stream``; the pair's tasks and rows may finish during the next pair."""
     rank, size = comm.rank, comm.size
     n, h = q0.shape[0], scene.h
     name = output.pair_name(tab_name, proj)
@@ -225,32 +229,45 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
         engine, s_tab = MapEngine(scene.step_map(tab_name), system, h, tab_name), 1
     else:
         engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
-    blocks = comm.bcast(_split(n, size, offload, speed) if rank == 0 else None, root=0)
+    clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0, "wait_plan": 0.0, "wait_gather": 0.0,
+             "wait_recv": 0.0, "batches": 0}
+    w0 = time.perf_counter()
+    if first:                                  # the run's first pair: an even split, batches from its first interval
+        plan = (comm.bcast(_split(n, size) if rank == 0 else None, root=0), None, None)
+    else:
+        plan = stream.next_plan()
+    clock["wait_plan"] = clock["gather"] = time.perf_counter() - w0
+    blocks, batch, cadence = plan
     lo, hi = blocks[rank]
     if saved is None:
         st = engine.state(q0[lo:hi])
     else:
         saved = comm.bcast(saved if rank == 0 else None, root=0)
         st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
-    g = output.pair_group(f, name) if rank == 0 else None
-    wall0 = output.wall_clock(g) if rank == 0 else 0.0
     t_start = time.perf_counter()
-    clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0}
-    out = _Outputs(comm, scene, Diagnostics(scene, system, q0[lo:hi]), (lo, hi), assign(scene, size), f, g,
-                   clock, after_output, name, lambda: wall0 + time.perf_counter() - t_start)
+    pair = _Pair(name, (lo, hi), Diagnostics(scene, system, q0[lo:hi]), clock, batch or 1, cadence or 1, t_start,
+                 dict(stream.spent), start_step, (start_step + scene.steps) // 2)
+    if rank == 0:
+        pair.g = output.pair_group(stream.f, name)
+        wall0 = output.wall_clock(pair.g)
+        pair.wall = lambda: wall0 + (pair.t_end or time.perf_counter()) - t_start
     if start_step == 0:
-        out.take(st, 0, checkpoint=False, flush=False)
+        stream.take(pair, st, 0, checkpoint=False, flush=False)
 
     def on_output(step):
         j = (step - start_step) // scene.output_every
-        if j == 1:        # rank 0's first interval sets the batches of outputs and how often the state is written
+        if j == 1:        # rank 0's first interval sets the batches and how often the state is written
             w0 = time.perf_counter()
-            out.batch, out.cadence = comm.bcast(
-                (_batch(w0 - t_start, hi - lo), _cadence(w0 - t_start, scene.checkpoint_seconds))
-                if rank == 0 else None, root=0)
-            clock["gather"] += time.perf_counter() - w0
-        last = step == scene.steps
-        out.take(st, step, checkpoint=last or j % out.cadence == 0, flush=last or j % out.batch == 0)
+            per_output = w0 - t_start
+            if batch is None:
+                pair.batch, pair.cadence = comm.bcast(
+                    (_batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+                    if rank == 0 else None, root=0)
+            if rank == 0 and has_next:     # sent from about the pair's middle (_Stream.plan_next)
+                stream.next_pair = (n, _batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+            stream.charge(clock, "gather", time.perf_counter() - w0)
+        if step < scene.steps:    # the last output is taken below, once the pair's advance is on its clock
+            stream.take(pair, st, step, checkpoint=j % pair.cadence == 0, flush=j % pair.batch == 0)
 
     done = [start_step]
 
@@ -261,17 +278,8 @@ def _run_pair(comm, f, scene, system, q0, tab_name, proj, job, offload, speed, a
 
     clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
                               _check_stop)
-    out.finish_sending()
-    timings[name] = clock
-    clocks = comm.gather(dict(clock, points=hi - lo), root=0)
-    if rank != 0:
-        return offload, speed
-    clock["per_rank"] = clocks                 # every rank's phases, for the cost model (scripts/scaling.py)
-    stats = [(c["advance"], c["points"], c["invariants"] + c["hdf5"]) for c in clocks]
-    output.wall_clock(g, wall0 + time.perf_counter() - t_start)
-    output.close_pair(g, scene.n_outputs, threshold)
-    f.flush()
-    return _balance(stats)
+    stream.take(pair, st, scene.steps, checkpoint=True, flush=True, last=True)
+    pair.t_end = time.perf_counter()
 
 
 def _unpad(state, s):
@@ -283,7 +291,7 @@ BATCH_BYTES = 1 << 28        # ... holding no more than this of a rank's points
 
 
 def _batch(seconds_per_output, points) -> int:
-    """Outputs a rank holds before the ranks meet: about BATCH_SECONDS of advancing, within BATCH_BYTES."""
+    """Outputs a rank holds before it hands them on: about BATCH_SECONDS of advancing, within BATCH_BYTES."""
     by_time = int(BATCH_SECONDS / max(seconds_per_output, 1e-6))
     return max(1, min(by_time, BATCH_BYTES // (128 * max(points, 1))))
 
@@ -295,13 +303,14 @@ def _cadence(seconds_per_output, checkpoint_seconds) -> int:
     return max(1, int(checkpoint_seconds / max(seconds_per_output, 1e-6)))
 
 
-OUTPUT_TAG = 7
+LAG = 2                              # batches a task owner may hold before it waits for another rank's parts
+PARTS_TAG, OUTPUT_TAG, PLAN_TAG = 5, 7, 9
 
 
 @dataclasses.dataclass
 class _Output:
-    """What a rank keeps of one output until its batch is taken: its points' errors, its part of
-    each sample set (q, p, λ, live), and what rank 0 writes of its points."""
+    """What a rank keeps of one output until its batch's tasks have run: its points' errors, its
+    part of each sample set (q, p, λ, live), and what rank 0 writes of its points."""
 
     step: int
     checkpoint: bool
@@ -311,128 +320,243 @@ class _Output:
 
 
 @dataclasses.dataclass
-class _Outputs:
-    """One rank's outputs of one pair.
+class _Pair:
+    """One pair as one rank runs it; on rank 0 also the pair's group of the file and its wall time."""
 
-    The outputs are taken in batches (:func:`_batch`: about two seconds of advancing; a batch also
-    ends at a checkpoint and at the pair's last output), so the ranks meet once a batch, not at
-    every output, and what one rank's advance gains or loses on the other's in one interval evens
-    out over the batch.  At a batch's end the sets' parts are gathered to the ranks that hold one
-    of the set's tasks, the tasks run, the other ranks hand their pieces to rank 0 without waiting
-    for it (:meth:`send`), and rank 0 writes the rows in order, each flushed.
-    """
-
-    comm: object
-    scene: object
-    diagnostics: Diagnostics
-    block: tuple                    # (lo, hi): the rows this rank advances
-    tasks: dict                     # {(invariant, form): rank}, the same on every rank
-    f: object                       # rank 0: the file and the pair's group
-    g: object
-    clock: dict
-    after_output: object
     name: str
-    wall: object                    # rank 0: the pair's wall time so far, for its row
-    batch: int = 1                  # outputs a batch (from the pair's first interval, on every rank)
-    cadence: int = 1                # outputs between checkpoints
+    block: tuple                    # (lo, hi): the rows this rank advances
+    diagnostics: Diagnostics
+    clock: dict                     # this rank's seconds in each phase of the pair
+    batch: int                      # outputs a batch
+    cadence: int                    # outputs between checkpoints
+    t_start: float
+    spent0: dict                    # the rank's seconds outside the advance (_Stream.spent) when the pair began
+    start: int                      # the step the pair began at on this run
+    middle: int                     # from this step on, rank 0 may send the next pair's plan
     held: list = dataclasses.field(default_factory=list)
-    sending: list = dataclasses.field(default_factory=list)   # this rank's unfinished send to rank 0
+    g: object = None
+    wall: object = None
+    t_end: float | None = None
+    at: int = 0                     # the step of the latest output taken
     breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
 
-    def take(self, st, step, checkpoint, flush):
+
+@dataclasses.dataclass
+class _Batch:
+    pair: _Pair
+    held: list                      # an _Output per output
+    last: bool                      # the pair's last batch
+
+
+class _Stream:
+    """One rank's outputs over the whole run, handed on without making the ranks meet.
+
+    The outputs of a pair are taken in batches (:func:`_batch`: about two seconds of advancing; a
+    batch also ends at a checkpoint and at the pair's last output).  At a batch's end a rank sends
+    its parts of the sample sets to the ranks that hold one of their invariant tasks (non-blocking)
+    and goes on advancing.  A task owner runs a batch's tasks once every rank's parts of it have
+    arrived, checked at each of its own batch ends; it waits only when it holds more than
+    :data:`LAG` batches, or at the run's end.  Then the rank sends its errors, task values and
+    pieces of the batch to rank 0, which writes the batches in order as they become complete.  So a
+    rank that is slower for a batch or two costs the others nothing; only drift over more than
+    :data:`LAG` batches, or about half a pair, makes a rank wait.  Rank 0 sends the next pair's
+    split from about the middle of a pair (:meth:`plan_next`), sized from the ranks' rates on it,
+    which come with their pieces.
+    """
+
+    def __init__(self, comm, scene, f, after_output, timings, threshold):
+        self.comm, self.scene, self.f = comm, scene, f
+        self.after_output, self.timings, self.threshold = after_output, timings, threshold
+        self.tasks = assign(scene, comm.size)
+        sets = list(enumerate(s for s, _ in scene.sample_sets))
+        self.needs = {o: [k for k, spec in sets if any(self.tasks[(spec.invariant, fm)] == o for fm in scene.forms)]
+                      for o in sorted(set(self.tasks.values()))}
+        rank = comm.rank
+        self.others = [r for r in range(comm.size) if r != rank] if rank in self.needs else []
+        self.pending, self.writing, self.sending = [], [], []
+        self.balance = (0.0, None)         # rank 0: (offload, speed) of the latest pair with every rank's clocks
+        self.plan = None
+        self.next_pair = None              # rank 0: (points, batch, cadence) of the next pair, until its plan is sent
+        self.current = None                # the pair this rank advances
+        self.rates = {}                    # rank 0: {rank: (pair, rates)}: the latest each rank sent
+        self.spent = {"invariants": 0.0, "hdf5": 0.0, "gather": 0.0}   # seconds outside the advance, any pair's
+
+    def charge(self, clock, phase, seconds):
+        """Book seconds of output work or exchange to a pair's clock and to the rank's running total."""
+        clock[phase] += seconds
+        self.spent[phase] += seconds
+
+    def rates_of(self, pair):
+        """(seconds advancing, points, seconds of output work), each a step, of this rank since it
+        began ``pair`` (as :func:`_balance` takes them): the other pairs' lagged tasks and rows
+        count as work done meanwhile, not as advance."""
+        d = {k: v - pair.spent0[k] for k, v in self.spent.items()}
+        work, steps = d["invariants"] + d["hdf5"], max(pair.at - pair.start, 1)
+        return (time.perf_counter() - pair.t_start - work - d["gather"]) / steps, pair.block[1] - pair.block[0], \
+            work / steps
+
+    # -- a rank's batches -------------------------------------------------------------------------
+    def take(self, pair, st, step, checkpoint, flush, last=False):
         """Keep this output's errors and parts (copies: the state moves on); with ``flush`` (always
-        with ``checkpoint``), take the batch."""
+        with ``checkpoint``), hand the batch on."""
         t0 = time.perf_counter()
-        lo, hi = self.block
-        h = self.scene.h
-        mine = (st.q, st.p, st.Lam / h, st.live)
+        lo, hi = pair.block
+        pair.at = step
+        mine = (st.q, st.p, st.Lam / self.scene.h, st.live)
         parts = []
         for _, rows in self.scene.sample_sets:
             a, b = max(lo, rows.start), min(hi, rows.stop)
             parts.append(tuple(np.array(x[max(a - lo, 0):max(b - lo, 0)]) for x in mine))
         flush = flush or checkpoint
-        if checkpoint:           # a batch's last output: sent or written before the state moves
-            piece = st.checkpoint()
+        if checkpoint:           # a batch's last output: copied, the state moves on before rank 0 writes it
+            piece = {k: np.array(v) for k, v in st.checkpoint().items()}
         else:                    # what rows need of the points (breakdown times only at a batch's end)
             piece = ({"breakdown_time": st.breakdown_time.copy()} if flush else {}) | \
                 ({"q": st.q.copy()} if self.scene.store_points else {})
-        self.held.append(_Output(step, checkpoint, self.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
-        self.clock["invariants"] += time.perf_counter() - t0
+        pair.held.append(_Output(step, checkpoint, pair.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
+        self.charge(pair.clock, "invariants", time.perf_counter() - t0)
         if flush:
-            self.flush()
+            self.close_batch(pair, step, last)
 
-    def flush(self):
-        """Take the held outputs: gathers, tasks, the pieces to rank 0, and there the rows."""
-        comm, scene, rank = self.comm, self.scene, self.comm.rank
+    def close_batch(self, pair, step, last):
+        """Send the batch's parts to the task owners, queue its tasks, and run (rank 0: write) what is ready."""
+        comm, t0 = self.comm, time.perf_counter()
+        held, pair.held = pair.held, []
+        for o, sets in self.needs.items():
+            if o != comm.rank:         # pickled at once: the state may move on while the message travels
+                self.sending.append(comm.isend({k: [x.parts[k] for x in held] for k in sets}, dest=o, tag=PARTS_TAG))
+        self.current = pair
+        self.pending.append(_Batch(pair, held, last))
+        self.sending = [r for r in self.sending if not r.Test()]
+        self.charge(pair.clock, "gather", time.perf_counter() - t0)
+        pair.clock["batches"] += 1
+        self.work(block=False)
+        if comm.rank == 0:
+            self.write_ready(block=False)
+            self.plan_next(pair, step, last)
+
+    def _ready(self):
+        """Whether every other rank's parts of the oldest queued batch have arrived."""
+        return all(self.comm.iprobe(source=r, tag=PARTS_TAG) for r in self.others)
+
+    def work(self, block):
+        """Run the tasks of the queued batches in order: those whose parts are here; with ``block``,
+        or while more than LAG are queued, waiting for the parts."""
+        while self.pending and (block or len(self.pending) > LAG or self._ready()):
+            self._tasks(self.pending.pop(0))
+
+    def _tasks(self, b):
+        comm, scene, rank, clock = self.comm, self.scene, self.comm.rank, b.pair.clock
         t0 = time.perf_counter()
-        held, wait, gathered = self.held, 0.0, {}
-        for k, (spec, _) in enumerate(scene.sample_sets):   # every gather first: then the ranks work at once
-            for owner in sorted({r for (inv, _), r in self.tasks.items() if inv == spec.invariant}):
-                w0 = time.perf_counter()
-                parts = comm.gather([x.parts[k] for x in held], root=owner)
-                wait += time.perf_counter() - w0
-                if rank == owner:
-                    gathered[k] = parts              # parts[r][i]: rank r's part at the batch's i-th output
-        values = [{} for _ in held]
-        for k, parts in gathered.items():
+        got = {}
+        for r in self.others:
+            got[r] = comm.recv(source=r, tag=PARTS_TAG)      # parts[k][i]: set k at the batch's i-th output
+        wait = time.perf_counter() - t0
+        values = [{} for _ in b.held]
+        for k in self.needs.get(rank, []):
             spec = scene.sample_sets[k][0]
             forms = [fm for fm in scene.forms if self.tasks[(spec.invariant, fm)] == rank]
             for i, v in enumerate(values):
-                q, p, lam, live = (np.concatenate([r[i][c] for r in parts]) for c in range(4))
+                parts = [got[r][k][i] if r != rank else b.held[i].parts[k] for r in range(comm.size)]
+                q, p, lam, live = (np.concatenate([x[c] for x in parts]) for c in range(4))
                 shp = spec.grid + (q.shape[1],)
-                v.update(self.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp),
-                                                     live))
-        mine = [(x.errors, v, x.piece) for x, v in zip(held, values)]
+                v.update(b.pair.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp),
+                                                       lam.reshape(shp), live))
+        mine = [(x.errors, v, x.piece) for x, v in zip(b.held, values)]
         t1 = time.perf_counter()
-        if rank != 0:            # pickled at once: the state may move on while the message travels
-            self.send(mine)
-        else:
-            batches = [mine] + [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
-        t2 = time.perf_counter()
-        self.clock["invariants"] += t1 - t0 - wait
-        self.clock["gather"] += wait + t2 - t1
-        self.clock["wait_gather"] = self.clock.get("wait_gather", 0.0) + wait      # of which at the sets' gathers
-        self.clock["wait_recv"] = self.clock.get("wait_recv", 0.0) + t2 - t1       # ... and handing pieces to rank 0
-        self.clock["meetings"] = self.clock.get("meetings", 0) + 1
-        self.held = []
+        self.charge(clock, "invariants", t1 - t0 - wait)
+        clock["wait_gather"] += wait
+        self.charge(clock, "gather", wait)
         if rank == 0:
-            self.write(held, batches)
+            self.writing.append((b, mine))
+            return
+        if b.last:
+            clock["points"] = b.pair.block[1] - b.pair.block[0]
+        rates = (self.current.name, self.rates_of(self.current))
+        self.sending.append(comm.isend((mine, rates, dict(clock) if b.last else None), dest=0, tag=OUTPUT_TAG))
+        self.charge(clock, "gather", time.perf_counter() - t1)
 
-    def write(self, held, batches):
+    # -- rank 0: the plan of the next pair, and the file ------------------------------------------
+    def plan_next(self, pair, step, last):
+        """Rank 0: send the next pair's (blocks, batch, cadence) to every rank without waiting, once
+        past the pair's middle with every rank's rates on this pair (at its last batch in any case).
+        The blocks follow those rates (:func:`_split`), else the latest finished pair's."""
+        if self.next_pair is None or step < pair.middle:
+            return
+        sent = (self.rates.get(r, (None, None)) for r in range(1, self.comm.size))
+        rates = [self.rates_of(pair)] + [x for name, x in sent if name == pair.name]
+        if len(rates) < self.comm.size and not last:
+            return
+        n, batch, cadence = self.next_pair
+        balance = _balance(rates) if len(rates) == self.comm.size else (0.0, None)
+        balance = balance if balance[1] is not None else self.balance
+        self.plan, self.next_pair = (_split(n, self.comm.size, *balance), batch, cadence), None
+        for r in range(1, self.comm.size):
+            self.sending.append(self.comm.isend(self.plan, dest=r, tag=PLAN_TAG))
+
+    def next_plan(self):
+        return self.plan if self.comm.rank == 0 else self.comm.recv(source=0, tag=PLAN_TAG)
+
+    def write_ready(self, block):
+        """Rank 0: write the queued batches in order, each once every rank's pieces of it are here
+        (with ``block``, waiting for them)."""
+        comm = self.comm
+        while self.writing and (block or all(comm.iprobe(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size))):
+            b, mine = self.writing.pop(0)
+            w0 = time.perf_counter()
+            msgs = [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
+            wait = time.perf_counter() - w0
+            self.rates.update((r, m[1]) for r, m in zip(range(1, comm.size), msgs))
+            b.pair.clock["wait_recv"] += wait
+            self.charge(b.pair.clock, "gather", wait)
+            self.write(b, [mine] + [m[0] for m in msgs])
+            if b.last:
+                self.finish_pair(b.pair, [m[2] for m in msgs])
+
+    def write(self, b, batches):
         """Rank 0: the batch's rows from every rank's (errors, values, piece) at each output, written
         together and flushed; the breakdown times when they changed, the state at a checkpoint."""
-        scene, t0 = self.scene, time.perf_counter()
+        scene, pair, t0 = self.scene, b.pair, time.perf_counter()
         rows = []
-        for i, x in enumerate(held):
-            parts = [b[i] for b in batches]
-            rows.append(self.diagnostics.combine(x.step * scene.h, [p[0] for p in parts],
+        for i, x in enumerate(b.held):
+            parts = [r[i] for r in batches]
+            rows.append(pair.diagnostics.combine(x.step * scene.h, [p[0] for p in parts],
                                                  {k: v for p in parts for k, v in p[1].items()}))
             if scene.store_points:
                 q = np.concatenate([p[2]["q"] for p in parts])
                 for spec, sl in scene.sample_sets:
                     rows[-1][f"points/{spec.name}"] = q[sl].reshape(spec.grid + (q.shape[1],))
-        last = held[-1]
-        full = _concat([b[-1][2] for b in batches])
+        last = b.held[-1]
+        full = _concat([r[-1][2] for r in batches])
         bt = full["breakdown_time"]
-        changed = self.breakdown_written is None or not np.array_equal(bt, self.breakdown_written)
+        changed = pair.breakdown_written is None or not np.array_equal(bt, pair.breakdown_written)
         t1 = time.perf_counter()
-        output.wall_clock(self.g, self.wall())
-        output.write_rows(self.f, self.g, last.step, rows, bt if changed else None, full if last.checkpoint else None)
-        self.breakdown_written = bt
-        self.clock["invariants"] += t1 - t0
-        self.clock["hdf5"] += time.perf_counter() - t1
+        output.wall_clock(pair.g, pair.wall())
+        output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None, full if last.checkpoint else None)
+        pair.breakdown_written = bt
+        self.charge(pair.clock, "invariants", t1 - t0)
+        self.charge(pair.clock, "hdf5", time.perf_counter() - t1)
         if self.after_output is not None:
-            for x in held:
-                self.after_output(self.name, x.step)
+            for x in b.held:
+                self.after_output(pair.name, x.step)
 
-    def send(self, payload):
-        """Hand a batch's pieces to rank 0 without waiting for it to take them (it may still be on
-        its own tasks or writing): the rank goes on advancing; the last batch's send is finished
-        first (by then rank 0 has received it)."""
-        self.finish_sending()
-        self.sending.append(self.comm.isend(payload, dest=0, tag=OUTPUT_TAG))
+    def finish_pair(self, pair, clocks):
+        """Rank 0, once a pair's last rows are written: its status, its clocks (every rank's, for the
+        cost model, scripts/scaling.py) and the balance of the pairs to come."""
+        clock = pair.clock
+        clocks = [dict(clock, points=pair.block[1] - pair.block[0])] + clocks
+        clock["per_rank"] = clocks
+        self.timings[pair.name] = clock
+        output.wall_clock(pair.g, pair.wall())
+        output.close_pair(pair.g, self.scene.n_outputs, self.threshold)
+        self.f.flush()
+        self.balance = _balance([(c["advance"], c["points"], c["invariants"] + c["hdf5"]) for c in clocks])
 
-    def finish_sending(self):
+    def drain(self):
+        """At the run's end: every queued task run, every batch written, every message delivered."""
+        self.work(block=True)
+        if self.comm.rank == 0:
+            self.write_ready(block=True)
         while self.sending:
             self.sending.pop().wait()
 
