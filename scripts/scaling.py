@@ -200,8 +200,9 @@ def lpt(costs, ranks):
 PART_BYTES = 3 * 8 * 4 + 1      # a sample point's q, p, λ (d = 4) and live flag, as the sets are gathered
 
 
-def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup):
-    """Predicted wall [s] of the scene on ``ranks`` ranks × 1 thread."""
+def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup, checkpoints=False):
+    """Predicted wall [s] of the scene on ``ranks`` ranks × 1 thread (with ``checkpoints``, also the
+    seconds of it that the checkpoints take: the state sent to rank 0 and written there)."""
     fits, diag, bw, row_write, ck_write, ck_bytes = (
         model[k] for k in ("fits", "diag", "bw", "row_write", "ck_write_per_byte", "ck_bytes_per_point"))
     n = n_loop + n_surf
@@ -217,12 +218,13 @@ def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup
     G = max(sum(size[inv] for inv in received[r]) for r in range(ranks)) * PART_BYTES * (ranks - 1) / ranks / bw
     ck = ck_bytes * n * ((ranks - 1) / ranks / bw + ck_write)    # one checkpoint: to rank 0, then written
     outputs = steps // every
-    total = startup
+    total, ck_total = startup, 0.0
     for c in pair_costs:
         interval = max((n * every * c + W.sum()) / ranks, W.max()) + G
         pair = outputs * interval + W.max() + G          # the outputs, plus the one at t = 0
+        ck_total += (1 + int(pair // 60.0)) * ck
         total += pair + (1 + int(pair // 60.0)) * ck
-    return total
+    return (total, ck_total) if checkpoints else total
 
 
 def build_model(res):
@@ -256,7 +258,7 @@ def predict(args):
     # the paper scene at 1,000 steps, and at 10^6 points (loop 166,000, surface 913 x 913)
     big = dict(n_loop=166_000, n_surf=913 * 913)
     lines = ["| ranks | paper scene, 12,000 points: wall [s] | speed-up | 10⁶ points: wall [s] | speed-up | "
-             "largest task share at 10⁶ |", "|---:|---:|---:|---:|---:|---:|"]
+             "largest task share at 10⁶ | checkpoints' share at 10⁶ |", "|---:|---:|---:|---:|---:|---:|---:|"]
     base_s = predict_wall(model, 1, 2000, 10000, 1000, every, pair_costs, startup)
     base_b = predict_wall(model, 1, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup)
     curve = []
@@ -264,10 +266,11 @@ def predict(args):
     biggest = max(fits[("I2", f)][0] * big["n_surf"] ** fits[("I2", f)][1] for f in FORMS)
     for r in (1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024):
         ws = predict_wall(model, r, 2000, 10000, 1000, every, pair_costs, startup)
-        wb = predict_wall(model, r, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup)
+        wb, ck = predict_wall(model, r, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup, True)
         share = biggest * (1000 // every + 1) * len(pair_costs) / wb
         curve.append((r, ws, wb))
-        lines.append(f"| {r} | {ws:,.0f} | {base_s / ws:.1f} | {wb:,.0f} | {base_b / wb:.1f} | {100 * share:.0f} % |")
+        lines.append(f"| {r} | {ws:,.0f} | {base_s / ws:.1f} | {wb:,.0f} | {base_b / wb:.1f} | {100 * share:.0f} % "
+                     f"| {100 * ck / wb:.1f} % |")
     print("\n".join(lines))
     import matplotlib
     matplotlib.use("Agg")
