@@ -235,7 +235,7 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
     if first:                                  # the run's first pair: an even split, batches from its first interval
         plan = (comm.bcast(_split(n, size) if rank == 0 else None, root=0), None, None)
     else:
-        plan = stream.next_plan()
+        plan = stream.receive_plan()
     clock["wait_plan"] = clock["gather"] = time.perf_counter() - w0
     blocks, batch, cadence = plan
     lo, hi = blocks[rank]
@@ -494,7 +494,8 @@ class _Stream:
         for r in range(1, self.comm.size):
             self.sending.append(self.comm.isend(self.plan, dest=r, tag=PLAN_TAG))
 
-    def next_plan(self):
+    def receive_plan(self):
+        """This rank's copy of the plan rank 0 sent for the pair it begins (waits only if rank 0 has not sent it)."""
         return self.plan if self.comm.rank == 0 else self.comm.recv(source=0, tag=PLAN_TAG)
 
     def write_ready(self, block):
