@@ -168,12 +168,17 @@ def test_complex_step_through_the_compiled_newton_solve():
     assert np.max(np.abs(Jc - Jf)) < 1e-9 * max(1.0, np.max(np.abs(Jc)))
 
 
+@pytest.mark.skipif(np.finfo(np.longdouble).eps >= np.finfo(np.float64).eps, reason="long double is double here")
 def test_the_numpy_engine_in_long_double_has_no_double_round_off():
     """The extended-precision reference of scripts/energy_drift.py: the numpy engine run on long
     double arrays (Newton to 4 eps of long double, its Jacobian inverted in double).  GLRK6 +
-    symmetric, 50 steps of h = 2 on guiding_centre_symmetric, against the exact flow: double's
-    round-off leaves 7e-15 (measured); long double's error is below 1e-16 (measured 2.8e-17, the
-    rounding of the exact flow itself, which is computed in double)."""
+    symmetric, 50 steps of h = 2 on guiding_centre_symmetric, against the exact flow.
+
+    What the code promises, on any CPU and BLAS: the state stays long double, and its error is
+    the rounding of the exact flow itself (computed in double): one ulp in z and u, two ulps of
+    the radius in the rotated x and y (measured: 0.25 ulp).  Double's own error is a round-off size that depends
+    on the BLAS kernel (7e-15 with OpenBLAS's Haswell kernels, 7.7e-16 with SkylakeX), so it is
+    only bounded from above here, far below the method's truncation error."""
     sy = integrators.system("guiding_centre_symmetric")
     q0 = np.array([sy.defaults["q0"]])
     exact = sy.exact_flow(q0, 100.0)
@@ -185,5 +190,8 @@ def test_the_numpy_engine_in_long_double_has_no_double_round_off():
         for k in range(1, 51):
             numpy_engine.advance(st, S, 2.0 * k)
         assert S.q.dtype == dt and S.live.all()
-        err[dt] = np.max(np.abs(S.q.astype(float) - exact))
-    assert err[np.float64] > 1e-15 and err[np.longdouble] < 1e-16
+        err[dt] = np.abs(S.q.astype(float) - exact)
+    bound = np.spacing(np.abs(exact))             # z and u: one ulp of the exact value
+    bound[:, :2] = 2 * np.spacing(np.hypot(exact[:, 0], exact[:, 1]))[:, None]   # x, y: a rotation's rounding
+    assert np.all(err[np.longdouble] <= bound)
+    assert err[np.float64].max() < 1e-12

@@ -251,23 +251,32 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         pair.g = output.pair_group(stream.f, name)
         wall0 = output.wall_clock(pair.g)
         pair.wall = lambda: wall0 + (pair.t_end or time.perf_counter()) - t_start
-    if start_step == 0:
-        stream.take(pair, st, 0, checkpoint=False, flush=False)
+    final = last_checkpoint_step(scene.steps, scene.output_every)
+    if start_step < scene.steps:   # the output at the start (a resume's checkpoint row was dropped: same bits)
+        stream.take(pair, st, start_step, checkpoint=False, flush=False)
+    measured = []
+
+    def first_interval():
+        """Rank 0's first interval sets the batches and how often the state is written (at the
+        pair's end when this run of the pair holds no whole interval)."""
+        w0 = time.perf_counter()
+        per_output = w0 - t_start
+        measured.append(per_output)
+        if batch is None:
+            pair.batch, pair.cadence = comm.bcast(
+                (_batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+                if rank == 0 else None, root=0)
+        if rank == 0 and has_next:     # sent from about the pair's middle (_Stream.plan_next)
+            stream.next_pair = (n, _batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+        stream.charge(clock, "gather", time.perf_counter() - w0)
 
     def on_output(step):
         j = (step - start_step) // scene.output_every
-        if j == 1:        # rank 0's first interval sets the batches and how often the state is written
-            w0 = time.perf_counter()
-            per_output = w0 - t_start
-            if batch is None:
-                pair.batch, pair.cadence = comm.bcast(
-                    (_batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
-                    if rank == 0 else None, root=0)
-            if rank == 0 and has_next:     # sent from about the pair's middle (_Stream.plan_next)
-                stream.next_pair = (n, _batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
-            stream.charge(clock, "gather", time.perf_counter() - w0)
+        if j == 1:
+            first_interval()
         if step < scene.steps:    # the last output is taken below, once the pair's advance is on its clock
-            stream.take(pair, st, step, checkpoint=j % pair.cadence == 0, flush=j % pair.batch == 0)
+            stream.take(pair, st, step, checkpoint=j % pair.cadence == 0 or step == final,
+                        flush=j % pair.batch == 0)
 
     done = [start_step]
 
@@ -278,8 +287,20 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
 
     clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
                               _check_stop)
-    stream.take(pair, st, scene.steps, checkpoint=True, flush=True, last=True)
+    if not measured:
+        first_interval()
+    stream.take(pair, st, scene.steps, checkpoint=scene.steps == final, flush=True, last=True)
     pair.t_end = time.perf_counter()
+
+
+def last_checkpoint_step(steps, every) -> int:
+    """The step of a finished pair's checkpoint: the last multiple of ``every`` (run.output_every).
+
+    Newton's factors are dropped at every multiple of the cadence, so a state there continues
+    bitwise as the uninterrupted run would; when ``steps`` is not a multiple, the last output (at
+    ``steps``) is a real output but the state kept is the one before it, from which a resume or a
+    longer run continues (it recomputes that last partial interval, or goes on past it)."""
+    return steps - steps % every
 
 
 def _unpad(state, s):

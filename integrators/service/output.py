@@ -346,17 +346,18 @@ def wall_clock(g, value=None) -> float:
 
 def restart_pair(f, name, output_every, finished_too=False):
     """Where a pair starts: None (finished, and ``finished_too`` is False), (0, None) (from the start,
-    rows cleared) or (step, state) of its checkpoint, with the rows after it cleared."""
+    rows cleared) or (step, state) of its checkpoint, with its row and the rows after it cleared
+    (the driver takes the checkpoint's row again from the state: the same bits)."""
     g = f["runs"][name]
     step, state = read_checkpoint(g)
     if g.attrs["status"] in FINISHED and not finished_too:
         return None
     g.attrs["status"] = "pending"
-    if step is None:
+    if step is None or step % output_every:      # (a state off the cadence, from before 0.1.1: start again)
         truncate(g, 0)
         g["breakdown_time"][...] = np.inf
         return 0, None
-    truncate(g, step // output_every + 1)
+    truncate(g, step // output_every)            # the checkpoint's own row is taken again from its state
     g["breakdown_time"][...] = state["breakdown_time"]   # as of the checkpoint: later rows are gone
     return step, state
 

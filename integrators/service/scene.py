@@ -178,7 +178,9 @@ class Scene:
 
     @property
     def n_outputs(self) -> int:
-        return self.steps // self.output_every + 1
+        """Outputs of a finished pair: at step 0, every run.output_every steps, and at run.steps
+        (the last interval may be shorter)."""
+        return -(-self.steps // self.output_every) + 1
 
     def system(self):
         """The scene's System: a built-in one, one from ϑ and H in the scene, or a user function's."""
