@@ -56,6 +56,12 @@ def set_threads(n: int | None):
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS if n is None else max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
 
 
+def max_threads() -> int:
+    """The most threads over points numba can run here (NUMBA_NUM_THREADS: the cores, by default)."""
+    import numba
+    return int(numba.config.NUMBA_NUM_THREADS)
+
+
 def kernel_cached() -> bool:
     """Whether numba's on-disk cache already holds a compiled step kernel (a first run compiles it)."""
     from . import kernel

@@ -19,6 +19,7 @@ to :data:`MAX_LENGTH` characters, so no file can make the parser compute for eve
 from __future__ import annotations
 
 import ast
+import math
 
 import sympy
 
@@ -84,6 +85,9 @@ class _Walker:
             v = node.value
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 self.fail(f"the literal {v!r}")
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ExpressionError(f"{self.where}: the number in '{self.text}' is too large for a double "
+                                      "(it reads as infinity)")
             return sympy.Integer(v) if isinstance(v, int) else sympy.Rational(repr(v))
         if isinstance(node, ast.Name):
             if node.id in self.names:

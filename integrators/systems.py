@@ -81,6 +81,21 @@ def _compile(exprs, shape, qsyms, params, name):
     return fn
 
 
+def _diff(e, x):
+    """∂e/∂x with the distributions that abs() and sign() leave (DiracDelta) taken as 0."""
+    d = sympy.diff(e, x)
+    return d.replace(sympy.DiracDelta, lambda *args: sympy.Integer(0)) if d.has(sympy.DiracDelta) else d
+
+
+def _not_finite(e) -> str | None:
+    """What makes a sympy expression not finite (zoo, nan, ±oo), or None."""
+    for bad, say in ((sympy.zoo, "complex infinity (zoo)"), (sympy.nan, "NaN"), (sympy.oo, "infinity"),
+                     (-sympy.oo, "-infinity")):
+        if e.has(bad):
+            return say
+    return None
+
+
 def _expr(x, where, known):
     """A sympy expression from a sympy object or number, or from a string by the restricted parser
     (integrators.expressions: never ``sympify`` of text, which would run it)."""
@@ -141,21 +156,51 @@ class System:
         self.defaults = dict(defaults or {})
 
     # -- symbolic derivatives -------------------------------------------------
+    # (taken away from kinks: the derivative of sign(x), which abs() brings, is 0, not DiracDelta(x),
+    # a distribution no code can evaluate; where a function is C² it is the derivative everywhere)
     @functools.cached_property
     def dtheta_expr(self):
-        return [[sympy.diff(t, x) for x in self.q] for t in self.theta_expr]
+        return [[_diff(t, x) for x in self.q] for t in self.theta_expr]
 
     @functools.cached_property
     def ddtheta_expr(self):
-        return [[[sympy.diff(e, x) for x in self.q] for e in row] for row in self.dtheta_expr]
+        return [[[_diff(e, x) for x in self.q] for e in row] for row in self.dtheta_expr]
 
     @functools.cached_property
     def dH_expr(self):
-        return [sympy.diff(self.H_expr, x) for x in self.q]
+        return [_diff(self.H_expr, x) for x in self.q]
 
     @functools.cached_property
     def ddH_expr(self):
-        return [[sympy.diff(e, x) for x in self.q] for e in self.dH_expr]
+        return [[_diff(e, x) for x in self.q] for e in self.dH_expr]
+
+    def validate(self):
+        """ValueError in one line naming the expression unless ϑ, H, their first and second
+        derivatives (what the step engine evaluates), the momentum and the domain are finite
+        expressions that the code generator can print: ``1/(x - x)``, ``log(0)*x`` or ``0/0`` are
+        refused here, before any file is written, instead of failing inside the engine."""
+        def where(key, i=None):
+            return f"system {self.name}: {key}" + ("" if i is None else f"[{i}]")
+
+        groups = [(where("theta", i), [e]) for i, e in enumerate(self.theta_expr)] + [(where("H"), [self.H_expr])]
+        groups += [(where("momentum"), [self.momentum_expr])] if self.momentum_expr is not None else []
+        groups += [(where("domain", i), [e]) for i, e in enumerate(self.domain_expr)]
+        for i, e in enumerate(self.theta_expr):
+            groups.append((f"{where('theta', i)}'s derivatives", [*self.dtheta_expr[i],
+                                                                  *[x for row in self.ddtheta_expr[i] for x in row]]))
+        groups.append((f"{where('H')}'s derivatives", [*self.dH_expr, *[x for row in self.ddH_expr for x in row]]))
+        for key, exprs in groups:
+            for e in exprs:
+                bad = _not_finite(e)
+                if bad:
+                    raise ValueError(f"{key} is not finite: it contains {bad} (a division by zero, or log of 0?)")
+        from .engine import generate_source
+        try:
+            generate_source(self)
+        except Exception as exc:           # a function the printer does not know: one line naming it
+            raise ValueError(f"system {self.name}: cannot generate the engine's code for ϑ and H: "
+                             f"{str(exc).splitlines()[0]}") from None
+        return self
 
     def _fn(self, name, exprs, shape):
         return _compile(exprs, shape, self.q, self.params, name)
@@ -275,7 +320,7 @@ def system_from(theta, H, q, name="user", params=None, symmetry=None, domain=(),
     """
     if len(q) % 2:
         raise ValueError(f"system {name}: dimension {len(q)} is odd; Ω̄ must be invertible (even d)")
-    return System(name, q, theta, H, params, symmetry, domain, defaults, momentum=momentum)
+    return System(name, q, theta, H, params, symmetry, domain, defaults, momentum=momentum).validate()
 
 
 # ----------------------------------------------------------------------------

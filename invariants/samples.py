@@ -15,7 +15,7 @@ def loop_parameters(n: int) -> np.ndarray:
     return np.arange(int(n)) / int(n)
 
 
-def loop(shape="guiding_centre", n=2000, *, d=4, plane=(0, 1), center=None, radii=(1.0, 1.0), **params):
+def loop(shape="guiding_centre", n=2000, **params):
     """Points of a closed loop: (n, d).
 
     shape
@@ -23,22 +23,29 @@ def loop(shape="guiding_centre", n=2000, *, d=4, plane=(0, 1), center=None, radi
         q(τ) = (r_x cos 2πτ, r_y sin 2πτ, r_z sin 2πτ, u₀ + u₁ cos 2πτ), defaults
         r_x = 0.5, r_y = 0.3, r_z = 0.1, u₀ = 0.5, u₁ = 0.05 (the paper's ``s`` read as τ);
         ``"ellipse"``: center + radii[0] cos 2πτ e_{plane[0]} + radii[1] sin 2πτ e_{plane[1]};
-        or a callable f(τ) → (n, d).
+        or a callable f(τ, **params) → (n, d), called with τ the (n,) array j/n, j = 0 … n − 1: one
+        period in [0, 1), the endpoint excluded (the loop closes on itself).
     """
     tau = loop_parameters(n)
     if callable(shape):
-        q = np.asarray(shape(tau), dtype=float)
+        q = np.asarray(shape(tau, **params), dtype=float)
         if q.ndim != 2 or q.shape[0] != len(tau):
             raise ValueError(f"loop function must return shape (n, d), got {q.shape}")
         return q
     if shape == "guiding_centre":
         p = dict(rx=0.5, ry=0.3, rz=0.1, u0=0.5, u1=0.05)
+        _unknown(params, shape, p)
         p.update(params)
         return np.stack([p["rx"] * np.cos(TWO_PI * tau), p["ry"] * np.sin(TWO_PI * tau),
                          p["rz"] * np.sin(TWO_PI * tau), p["u0"] + p["u1"] * np.cos(TWO_PI * tau)], axis=1)
     if shape in ("ellipse", "circle"):
-        q = np.zeros((len(tau), d)) + (0.0 if center is None else np.asarray(center, dtype=float))
-        i, j = plane
+        p = dict(d=4, plane=(0, 1), center=None, radii=(1.0, 1.0))
+        _unknown(params, shape, p)
+        p.update(params)
+        d = p["d"]
+        i, j = _plane(p["plane"], d)
+        q = np.zeros((len(tau), d)) + _center(p["center"], d)
+        radii = _pair(p["radii"], "radii")
         q[:, i] += radii[0] * np.cos(TWO_PI * tau)
         q[:, j] += radii[1] * np.sin(TWO_PI * tau)
         return q
@@ -51,8 +58,7 @@ def surface_parameters(n_sigma: int, n_tau: int):
     return np.meshgrid(s, t, indexing="ij")
 
 
-def surface(shape="guiding_centre", n_sigma=100, n_tau=100, *, d=4, plane=(0, 1), center=None,
-            size=(1.0, 1.0), **params):
+def surface(shape="guiding_centre", n_sigma=100, n_tau=100, **params):
     """Points of a surface patch: (n_σ, n_τ, d).
 
     shape
@@ -60,24 +66,64 @@ def surface(shape="guiding_centre", n_sigma=100, n_tau=100, *, d=4, plane=(0, 1)
         r_z cos 2πσ cos 2πτ, u₀ + u₁ sin 2πσ sin 2πτ), defaults r₀ = 0.1, r_z = 0.1,
         u₀ = 0.5, u₁ = 0.01;
         ``"rectangle"``: center + size[0](σ − ½) e_{plane[0]} + size[1](τ − ½) e_{plane[1]};
-        or a callable f(σ, τ) → (n_σ, n_τ, d).
+        or a callable f(σ, τ, **params) → (n_σ, n_τ, d), called with σ, τ two (n_σ, n_τ) arrays of
+        Chebyshev points on [0, 1] (endpoints included, σ along axis 0).
     """
     S, T = surface_parameters(n_sigma, n_tau)
     if callable(shape):
-        q = np.asarray(shape(S, T), dtype=float)
+        q = np.asarray(shape(S, T, **params), dtype=float)
         if q.ndim != 3 or q.shape[:2] != S.shape:
             raise ValueError(f"surface function must return shape (n_sigma, n_tau, d), got {q.shape}")
         return q
     if shape == "guiding_centre":
         p = dict(r0=0.1, rz=0.1, u0=0.5, u1=0.01)
+        _unknown(params, shape, p)
         p.update(params)
         return np.stack([p["r0"] * (S - 0.5), p["r0"] * (T - 0.5),
                          p["rz"] * np.cos(TWO_PI * S) * np.cos(TWO_PI * T),
                          p["u0"] + p["u1"] * np.sin(TWO_PI * S) * np.sin(TWO_PI * T)], axis=-1)
     if shape == "rectangle":
-        q = np.zeros(S.shape + (d,)) + (0.0 if center is None else np.asarray(center, dtype=float))
-        i, j = plane
+        p = dict(d=4, plane=(0, 1), center=None, size=(1.0, 1.0))
+        _unknown(params, shape, p)
+        p.update(params)
+        d = p["d"]
+        i, j = _plane(p["plane"], d)
+        q = np.zeros(S.shape + (d,)) + _center(p["center"], d)
+        size = _pair(p["size"], "size")
         q[..., i] += size[0] * (S - 0.5)
         q[..., j] += size[1] * (T - 0.5)
         return q
     raise ValueError(f"unknown surface shape '{shape}' (use 'guiding_centre', 'rectangle' or a callable)")
+
+
+def _unknown(params, shape, allowed=()):
+    extra = sorted(set(params) - set(allowed))
+    if extra:
+        raise ValueError(f"params: the shape '{shape}' takes no parameter '{extra[0]}'"
+                         + (f" (it takes {', '.join(sorted(allowed))})" if allowed else ""))
+
+
+def _plane(plane, d):
+    if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 2:
+        raise ValueError(f"params.d must be an integer ≥ 2, got {d!r}")
+    ok = (isinstance(plane, (list, tuple)) and len(plane) == 2 and
+          all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) and 0 <= k < d for k in plane))
+    if not ok or plane[0] == plane[1]:
+        raise ValueError(f"params.plane must be two different coordinate indices in 0 … {d - 1}, got {plane!r}")
+    return int(plane[0]), int(plane[1])
+
+
+def _center(center, d):
+    if center is None:
+        return np.zeros(d)
+    c = np.asarray(center, dtype=float) if isinstance(center, (list, tuple, np.ndarray)) else None
+    if c is None or c.shape != (d,):
+        raise ValueError(f"params.center must be a list of d = {d} numbers, got {center!r}")
+    return c
+
+
+def _pair(v, key):
+    ok = isinstance(v, (list, tuple, np.ndarray)) and len(v) == 2
+    if not ok:
+        raise ValueError(f"params.{key} must be a list of 2 numbers, got {v!r}")
+    return float(v[0]), float(v[1])

@@ -470,7 +470,7 @@ def test_file_py_and_module_shapes_in_scenes_and_a_raising_shape(tmp_path, monke
     (sub / "b.toml").write_text(text.replace("myshapes.py:circle", "myshapes:circle"))
     assert load_scene(str(sub / "b.toml")).loop_points().shape == (64, 4)
     (sub / "c.toml").write_text(text.replace("myshapes.py:circle", "myshapes:boom"))
-    with pytest.raises(SceneError, match=r"^loop.shape 'myshapes:boom' failed: RuntimeError: shape exploded$"):
+    with pytest.raises(SceneError, match=r"^loop.shape 'myshapes:boom' failed: RuntimeError: shape exploded \(a loop shape is called as f\(tau"):
         load_scene(str(sub / "c.toml"))
 
 

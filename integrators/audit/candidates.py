@@ -55,7 +55,7 @@ def load_function(spec: str) -> Callable:
     return load_callable(spec, "step map")
 
 
-def candidates_from(spec: str, projections=None) -> list[Candidate]:
+def candidates_from(spec: str, projections=None, what="candidate") -> list[Candidate]:
     """Candidates named by a CLI argument: a built-in tableau, a tableau TOML file, or module:function.
 
     A tableau is audited with every projection in ``projections`` that it admits (default: all
@@ -73,7 +73,7 @@ def candidates_from(spec: str, projections=None) -> list[Candidate]:
             raise ValueError("--projection applies to tableaus only, not to a step function")
         return [Candidate(spec.rsplit(":", 1)[1], fn, "function")]
     else:
-        raise ValueError(f"candidate '{spec}' is not a built-in tableau ({', '.join(TABLEAU_NAMES)}), "
+        raise ValueError(f"{what} '{spec}' is not a built-in tableau ({', '.join(TABLEAU_NAMES)}), "
                          "a .toml tableau file, or module:function")
     wanted = list(projections) if projections else list(PROJECTIONS)
     for p in wanted:
@@ -97,4 +97,8 @@ def _call(step, q, p, lam, h, system):
     out = step(q, p, lam, h, system)
     if not (isinstance(out, tuple) and len(out) == 3):
         raise ValueError("the step map must return a tuple (q, p, lam)")
-    return tuple(np.asarray(x) for x in out)
+    out = tuple(np.asarray(x) for x in out)
+    if any(x.shape != np.shape(q) for x in out):
+        raise ValueError(f"the step map returned arrays of shapes {', '.join(str(x.shape) for x in out)} for "
+                         f"inputs of shape {np.shape(q)} (it must return q, p, lam of the inputs' shape)")
+    return out

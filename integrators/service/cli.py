@@ -66,10 +66,16 @@ def _abort_other_ranks(code):
         MPI.COMM_WORLD.Abort(code)
 
 
+def _printable(text) -> str:
+    """``text`` with control characters (ANSI escapes, newlines) shown escaped, not sent to the terminal."""
+    text = str(text)
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def _print_summary(summaries, out):
     keys = sorted({k for s in summaries for k in s.max_errors})
     head = f"{'pair':22s} {'status':14s} {'broke':>5s} " + " ".join(f"{k:>17s}" for k in keys) + f" {'wall [s]':>9s}"
-    print(f"\nwrote {out}\nmax relative invariant error |I(t) − I(0)|/|I(0)| over the outputs where the set was resolved:")
+    print(f"\nwrote {_printable(out)}\nmax relative invariant error |I(t) − I(0)|/|I(0)| over the outputs where the set was resolved:")
     print(head)
     notes = []
     for s in summaries:
@@ -83,7 +89,12 @@ def _print_summary(summaries, out):
             else:
                 cells.append(f"{v:17.3e}" + ("" if k.split()[0] not in s.unresolved_from else "*"))
         errs = " ".join(c if len(c) == 17 else c[1:] for c in cells)
-        print(f"{s.pair:22s} {s.status:14s} {s.breakdowns:5d} {errs} {s.wall_time:9.1f}")
+        print(f"{_printable(s.pair):22s} {s.status:14s} {s.breakdowns:5d} {errs} {s.wall_time:9.1f}")
+        if s.status == "partial":
+            first, total = s.breakdown
+            notes.append(f"  {_printable(s.pair)}: {s.breakdowns} of {total} points broke down (the first at t = "
+                         f"{first:g}); a set's errors are over its outputs before its first broken point "
+                         "(— where there are none after t = 0)")
         for inv, (t, bad, total) in s.unresolved_from.items():
             notes.append(f"  * {s.pair}: the {'loop' if inv == 'I1' else 'surface'} was under-resolved at {bad} of "
                          f"{total} outputs (first at t = {t:g}); its {inv} errors are over the others only "
@@ -112,12 +123,15 @@ def cmd_run(args) -> int:
         if args.steps < 1:
             raise ValueError(f"--steps must be a positive integer, got {args.steps}")
         scene = scene.with_steps(args.steps)
-    if args.threads is not None and args.threads < 1:
-        raise ValueError(f"--threads must be a positive integer, got {args.threads}")
+    if args.threads is not None:
+        from ..engine import max_threads
+        if not 1 <= args.threads <= max_threads():
+            raise ValueError(f"--threads must be between 1 and {max_threads()} (the cores numba can use here), "
+                             f"got {args.threads}")
     from .ranks import default_threads
     threads = args.threads or default_threads(comm)
     if comm.rank == 0:
-        print(f"scene '{scene.name}': {scene.system_name}, {scene.n_points} points, {len(scene.pairs)} pairs, "
+        print(f"scene '{_printable(scene.name)}': {_printable(scene.system_name)}, {scene.n_points} points, {len(scene.pairs)} pairs, "
               f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
               f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
               flush=True)
@@ -130,8 +144,19 @@ def cmd_run(args) -> int:
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
                     progress=False if args.quiet else None, version=__version__, threads=threads)
     if comm.rank == 0:
-        return _print_summary(summaries, out)
+        code = _print_summary(summaries, out)
+        _print_user_code()
+        return code
     return EXIT_OK
+
+
+def _print_user_code():
+    """Say which of the user's code the scene ran (README: a scene that names code runs it)."""
+    from .plugins import LOADED
+    if LOADED:
+        print("the scene ran this Python code of yours (like a script):")
+        for (what, spec), where in LOADED.items():
+            print(f"  {what} = {_printable(spec)}: {_printable(where)}")
 
 
 def cmd_audit(args) -> int:
@@ -151,9 +176,11 @@ def cmd_audit(args) -> int:
     refs = []
     for ref in ([] if args.reference == ["none"] else args.reference):
         tab, sep, proj = ref.rpartition("-")
-        if not sep:
+        if not sep or ":" in tab:
             raise ValueError(f"reference '{ref}' must be TABLEAU-projection, e.g. GLRK2-symmetric")
-        refs += audit.candidates_from(tab, [proj])
+        refs += audit.candidates_from(tab, [proj], what=f"reference '{ref}': tableau")
+    _check_writable(args.json, "--json", file=True)      # before the audit, not after it
+    _check_writable(args.plots, "--plots", file=False)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     report = audit.audit(cands, scene, references=refs, defect_points=args.points, levels=args.levels, progress=say)
     print(audit.text_report(report))
@@ -167,11 +194,34 @@ def cmd_audit(args) -> int:
     return 0
 
 
+def _check_writable(path, option, file):
+    """ValueError naming ``option`` unless ``path`` (a file, or a directory for PNGs) can be written."""
+    if not path:
+        return
+    from pathlib import Path
+    p = Path(path)
+    folder = p.parent if file else p
+    if file and p.is_dir():
+        raise ValueError(f"{option} '{path}' is a directory; give a file name")
+    if not file and p.exists() and not p.is_dir():
+        raise ValueError(f"{option} '{path}' is a file, not a directory")
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if file and not folder.is_dir():
+        raise ValueError(f"{option}: directory '{folder}' does not exist")
+    if not os.access(probe if str(probe) else ".", os.W_OK | os.X_OK):
+        raise ValueError(f"{option}: cannot write in '{probe}' (permission denied)")
+
+
 def cmd_scenes(args) -> int:
     from . import scene as scene_module
     from .scene import builtin_scenes, load_scene
     if args.keys:
-        print(scene_module.__doc__.strip())
+        import re
+        text = scene_module.__doc__.strip()
+        text = re.sub(r":(?:class|func|data|mod|meth):`~?([^`]+)`", r"\1", text).replace("``", "")
+        print(text.replace("::\n", ":\n"))
         return EXIT_OK
     for name, path in builtin_scenes().items():
         s = load_scene(name)
@@ -261,7 +311,7 @@ def main(argv=None) -> int:
     def say(msg):
         # input errors are the same on every rank: print them once; say which rank otherwise
         if rank == 0:
-            print(f"poincare: {msg}", file=sys.stderr, flush=True)
+            print(f"poincare: {_printable(msg)}", file=sys.stderr, flush=True)
 
     previous = {}
     if args.func is cmd_run:
@@ -275,7 +325,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except OutputError as exc:
-        print(f"poincare: error: {exc}" + (f" (rank {rank})" if rank else ""), file=sys.stderr, flush=True)
+        print(f"poincare: error: {_printable(exc)}" + (f" (rank {rank})" if rank else ""), file=sys.stderr, flush=True)
         sys.stdout.flush()
         _abort_other_ranks(EXIT_OUTPUT)
         if argv is None:

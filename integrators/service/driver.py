@@ -16,6 +16,7 @@ Without mpiexec (or without mpi4py) it runs as a single process.
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -45,6 +46,7 @@ class PairSummary:
     wall_time: float
     timings: dict = dataclasses.field(default_factory=dict)
     unresolved_from: dict = dataclasses.field(default_factory=dict)   # {'I1': first t the set was under-resolved}
+    breakdown: tuple = (None, 0)     # (first breakdown time or None, points of the run)
 
 
 class Progress:
@@ -96,7 +98,10 @@ def _resume_plan(path, scene):
     """Check that ``path`` was written by ``scene`` (or by the same scene with fewer steps)."""
     from .scene import parse_scene, scene_differences
     text, steps = output.read_scene_text(path)
-    old = parse_scene(text, origin=str(path))
+    try:
+        old = parse_scene(text, origin=str(path))
+    except ValueError as exc:
+        raise output.DamagedFile(f"cannot resume '{path}': the scene stored in it does not read ({exc})") from None
     if steps is not None:
         old = dataclasses.replace(old, steps=steps)
     diff = scene_differences(old, scene)
@@ -109,6 +114,8 @@ def _resume_plan(path, scene):
     if diff == ["run.steps"]:
         raise ValueError(f"cannot resume '{path}' with fewer steps ({scene.steps}) than it was run for ({old.steps})")
     if diff:
+        if scene.steps > old.steps:           # growing run.steps is allowed: not a difference to name
+            diff = [k for k in diff if k != "run.steps"]
         raise ValueError(f"cannot resume '{path}': the scene differs in {', '.join(diff)} "
                          "(only run.steps may grow; everything else must match)")
     return None
@@ -138,23 +145,43 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 grown_from = _resume_plan(path, scene)
             except ValueError as exc:
                 error = str(exc)
+        if error is None and resume:
+            try:
+                output.check_resumable(path, scene)       # read-only: a refused resume changes no byte
+            except ValueError as exc:
+                error = str(exc)
     error = comm.bcast(error, root=0)
     if error:
         raise ValueError(error)
 
     system = scene.system()
+    error = None
+    try:                               # the engine's code for this system, compiled before any file is touched
+        from ..engine import point_functions
+        point_functions(system)
+    except Exception as exc:
+        error = f"system {system.name}: the step engine cannot be compiled for it: {type(exc).__name__}: " \
+            f"{str(exc).splitlines()[0] if str(exc) else ''}"
+    error = comm.bcast(error if rank == 0 else None, root=0)
+    if error:
+        raise ValueError(error)
     q0 = scene.points(system)
     n = q0.shape[0]
 
     f = None
     todo = []
+    replacing = None                   # --force over an existing file: written beside it, renamed over it once started
     if rank == 0:
         try:
             if resume:
                 f = output.reopen(path, scene)
             else:
                 max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
-                f = output.create(path, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
+                target = path
+                if path.exists():
+                    replacing = _Replacement(path)
+                    target = replacing.new
+                f = output.create(target, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
             for tab, proj in scene.pairs:
                 todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
                                                 finished_too=grown_from is not None))
@@ -166,6 +193,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 _close_quietly(f)
     todo = comm.bcast(todo if rank == 0 else None, root=0)
     if isinstance(todo, Exception):
+        if replacing is not None:
+            replacing.abandon()
         raise todo
 
     timings = {}
@@ -173,6 +202,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
     try:
         stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED)
+        if replacing is not None:      # the old file goes once the new run has written its first rows
+            stream.started = replacing.commit
         jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, todo) if job is not None]
         for i, (tab_name, proj, job) in enumerate(jobs):
             _check_stop()
@@ -188,6 +219,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     except output.OutputError:
         if f is not None:
             _close_quietly(f)
+        if replacing is not None:
+            replacing.abandon()
         raise
     except (OSError, RuntimeError) as exc:      # h5py raises RuntimeError for some failed writes
         if f is not None:
@@ -197,14 +230,39 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     except BaseException:
         if f is not None:
             _close_quietly(f)
+        if replacing is not None:
+            replacing.abandon()
         raise
     if rank != 0:
         return None
     f.close()
+    if replacing is not None:      # (a scene with no pair to run has written no rows)
+        replacing.commit()
     summaries = finalize(path, scene)
     for s_ in summaries:
         s_.timings = timings.get(s_.pair, {})
     return summaries
+
+
+class _Replacement:
+    """``--force`` over an existing file: the new run writes ``.NAME.PID.new`` beside it, which
+    replaces the old file (an atomic rename) once its first rows are written; a run that stops
+    before that removes its new file and leaves the old one as it was."""
+
+    def __init__(self, path):
+        self.path, self.new, self.done = path, path.with_name(f".{path.name}.{os.getpid()}.new"), False
+
+    def commit(self):
+        if not self.done:
+            os.replace(self.new, self.path)
+            self.done = True
+
+    def abandon(self):
+        if not self.done:
+            try:
+                os.remove(self.new)
+            except OSError:
+                pass
 
 
 def _close_quietly(f):
@@ -401,6 +459,7 @@ class _Stream:
         self.current = None                # the pair this rank advances
         self.rates = {}                    # rank 0: {rank: (pair, rates)}: the latest each rank sent
         self.spent = {"invariants": 0.0, "hdf5": 0.0, "gather": 0.0}   # seconds outside the advance, any pair's
+        self.started = None                # rank 0, --force: called once the first rows are written
 
     def charge(self, clock, phase, seconds):
         """Book seconds of output work or exchange to a pair's clock and to the rank's running total."""
@@ -556,6 +615,9 @@ class _Stream:
         output.wall_clock(pair.g, pair.wall())
         output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None, full if last.checkpoint else None)
         pair.breakdown_written = bt
+        if self.started is not None:
+            self.started()
+            self.started = None
         self.charge(pair.clock, "invariants", t1 - t0)
         self.charge(pair.clock, "hdf5", time.perf_counter() - t1)
         if self.after_output is not None:
@@ -585,6 +647,6 @@ class _Stream:
 
 def finalize(path, scene):
     """Each pair's status and wall_time attributes, written, and the summaries."""
-    return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved)
-            for name, status, broke, errs, wall, unresolved in
+    return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown)
+            for name, status, broke, errs, wall, unresolved, breakdown in
             output.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]

@@ -46,6 +46,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
+import os
 import re
 
 import h5py
@@ -88,6 +89,43 @@ class DamagedFile(ValueError):
     """A run file whose metadata or data is damaged (failed checksum, missing groups)."""
 
 
+class BusyFile(ValueError):
+    """A run file that another process holds open for writing (HDF5's file lock)."""
+
+
+def open_file(path, mode="r"):
+    """h5py.File(path, mode) with one-line errors: a file locked by a run that is still writing it
+    is :class:`BusyFile`, anything else that cannot be opened as HDF5 :class:`DamagedFile`."""
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"'{path}' does not exist")
+    try:
+        return h5py.File(path, mode)
+    except BlockingIOError:
+        raise BusyFile(f"'{path}' is open for writing by another process (a run still going?): wait for it to "
+                       "finish or stop it first") from None
+    except OSError as exc:
+        if "lock" in str(exc):
+            raise BusyFile(f"'{path}' is locked by another process (a run still going?): wait for it to finish "
+                           "or stop it first") from None
+        raise DamagedFile(f"cannot read '{path}': damaged or not an HDF5 run file ({plain_error(exc)})") from None
+
+
+def check_size(ds, limit):
+    """DamagedFile unless dataset ``ds`` claims at most ``limit`` bytes: damaged metadata can claim
+    petabytes, and reading it would try to allocate them."""
+    nbytes = ds.size * ds.dtype.itemsize if ds.shape is not None else 0
+    if nbytes > limit:
+        raise DamagedFile(f"'{ds.file.filename}' is damaged: {ds.name} claims {nbytes / 2**20:,.0f} MiB, more "
+                          "than the file can hold")
+
+
+def size_limit(path) -> int:
+    """The most bytes a dataset of the run file ``path`` can hold: twice the file (a slot never written
+    reads as zeros without taking space), and at least 16 MiB."""
+    import os
+    return max(2 * os.path.getsize(path), 1 << 24)
+
+
 def plain_error(exc) -> str:
     """The useful part of an h5py/OS error: 'Permission denied', 'No space left on device', ..."""
     text = str(exc)
@@ -125,9 +163,10 @@ def ensure_space(path, nbytes, where):
     first and stops with the file intact up to its last output."""
     free = available_bytes(path)
     if free < nbytes + SPACE_MARGIN:
+        held = f"the file holds every output up to {where}" if where else "the file holds no output yet"
         raise OutputError(f"no space left for '{path}' ({free / 2**20:.2f} MiB available, the next output "
-                          f"needs about {(nbytes + SPACE_MARGIN) / 2**20:.2f} MiB); the file holds every output "
-                          f"up to {where}: free space, then run again with --resume")
+                          f"needs about {(nbytes + SPACE_MARGIN) / 2**20:.2f} MiB); {held}: free space, then run "
+                          "again with --resume")
 
 
 def _series(g, name, dtype="f8"):
@@ -231,29 +270,101 @@ def truncate(g, n_rows):
 
 
 def read_scene_text(path):
-    """(scene TOML, steps in force) stored in a run file (DamagedFile / ValueError in one line)."""
+    """(scene TOML, steps in force) stored in a run file (DamagedFile / BusyFile / ValueError in one line)."""
     try:
-        with h5py.File(path, "r") as f:
+        with open_file(path) as f:
             if f.attrs.get("format") not in (FORMAT, "poincare/1"):
                 raise ValueError(f"'{path}' is not a poincare run file")
             steps = f.attrs.get("steps")
             return str(f.attrs["scene"]), (None if steps is None else int(steps))
-    except (OSError, KeyError) as exc:
+    except (FileNotFoundError, DamagedFile, BusyFile):
+        raise
+    except (OSError, KeyError, TypeError, UnicodeDecodeError) as exc:
         raise DamagedFile(f"cannot read '{path}': damaged or not an HDF5 run file ({plain_error(exc)})") from None
 
 
 def read_tableau_digests(path) -> dict:
     """{label: Tableau.digest} of the tableau files a run was started with ({} for none / older files)."""
-    with h5py.File(path, "r") as f:
-        return json.loads(f.attrs.get("tableau_digests", "{}"))
+    try:
+        with open_file(path) as f:
+            return json.loads(f.attrs.get("tableau_digests", "{}"))
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, (DamagedFile, BusyFile)):
+            raise
+        raise DamagedFile(f"'{path}' is damaged: cannot read its tableau digests ({plain_error(exc)})") from None
+
+
+def check_resumable(path, scene):
+    """Read-only, before a resume opens ``path`` for writing: every pair of ``scene`` is there with
+    its datasets of the shapes the scene gives, no dataset claims more than the file can hold,
+    every checksum holds and the checkpoint slots are readable.  DamagedFile in one line, naming
+    what is wrong; the file is not changed."""
+    from ..engine import State
+    limit = size_limit(path)
+    with open_file(path) as f:
+        try:
+            runs = f["runs"]
+            _check_pairs(f, runs, scene, limit, State)
+        except DamagedFile:
+            raise
+        except Exception as exc:     # h5py raises KeyError, OSError, RuntimeError, ValueError on damaged metadata
+            raise DamagedFile(f"'{path}' is damaged ({type(exc).__name__}: {plain_error(exc)}); it cannot be "
+                              "resumed (start again with --force)") from None
+
+
+def _check_pairs(f, runs, scene, limit, State):
+    path = f.filename
+    n, rows = scene.n_points, scene.n_outputs
+
+    def damaged(what):
+        return DamagedFile(f"'{path}' is damaged: {what}; it cannot be resumed (start again with --force)")
+
+    for tab, proj in scene.pairs:
+        name = pair_name(tab, proj)
+        if name not in runs:
+            raise damaged(f"the pair {name} is missing")
+        g = runs[name]
+        if str(g.attrs.get("status", "")) not in STATUSES:
+            raise damaged(f"{g.name} has the status {g.attrs.get('status')!r}")
+        lengths = set()
+
+        def visit(key, obj):
+            if not isinstance(obj, h5py.Dataset):
+                return
+            try:
+                check_size(obj, limit)
+            except DamagedFile as exc:
+                raise DamagedFile(f"{exc}; it cannot be resumed (start again with --force)") from None
+            try:
+                obj[...]
+            except (OSError, ValueError, RuntimeError, MemoryError) as exc:
+                raise damaged(f"cannot read {obj.name} ({plain_error(exc)})") from None
+            if obj.maxshape and obj.maxshape[0] is None:
+                lengths.add(obj.shape[0])
+        g.visititems(visit)
+        if len(lengths) > 1 or (lengths and max(lengths) > rows):
+            raise damaged(f"the series of {g.name} have {sorted(lengths)} rows (at most {rows})")
+        if g["breakdown_time"].shape != (n,):
+            raise damaged(f"{g.name}/breakdown_time has shape {g['breakdown_time'].shape}, not ({n},)")
+        for slot in ("a", "b"):
+            c = g[f"checkpoint/{slot}"]
+            if c["step"].shape != ():
+                raise damaged(f"{c.name}/step is not a number")
+            for field, (shape, dtype) in State.schema(n, 1, 1).items():
+                ds = c[field]
+                if ds.shape[0] != n or ds.dtype != dtype:
+                    raise damaged(f"{ds.name} has shape {ds.shape} and type {ds.dtype}")
 
 
 def open_for_resume(path):
     """Reopen an interrupted run for writing; the caller has checked its scene."""
     try:
         f = h5py.File(path, "r+")
+    except BlockingIOError:
+        raise BusyFile(f"cannot resume '{path}': it is open for writing by another process (a run still "
+                       "going?)") from None
     except OSError as exc:
-        raise ValueError(f"cannot resume '{path}': {plain_error(exc)}") from None
+        raise OutputError(f"cannot resume '{path}': {plain_error(exc)}") from None
     if f.attrs.get("format") != FORMAT:
         found = f.attrs.get("format")
         f.close()
@@ -295,7 +406,8 @@ def pair_summary(g, n_outputs, threshold):
                 unresolved_from[inv] = (float(t[np.flatnonzero(~ok)[0]]), int((~ok).sum()), int(ok.size))
             for form in g[inv]:
                 v = g[inv][form][...]
-                use = ok if not broke else np.isfinite(v)
+                use = ok & np.isfinite(v)       # resolved, and not yet broken down (NaN from a breakdown on)
+                use[:1] = False                 # the error at t = 0 is 0 by definition: it vouches for nothing
                 e = relative_error(v)
                 errs[f"{inv} {form}"] = float(np.max(e[use])) if use.any() and np.isfinite(e[use]).all() else np.nan
     except OSError as exc:
@@ -325,9 +437,9 @@ def set_status(g, status, unresolved_from):
 
 
 def reopen(path, scene):
-    """The file of an interrupted or grown run, open for writing, checked, with the scene now in force."""
+    """The file of an interrupted or grown run (checked by :func:`check_resumable`), open for
+    writing, with the scene now in force."""
     f = open_for_resume(path)
-    verify(f, path)
     f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
     f.attrs["steps"] = scene.steps
     return f
@@ -370,8 +482,11 @@ def write_rows(f, g, step, rows, breakdown_time=None, state=None):
     need = sum(np.asarray(v).nbytes for row in rows for v in row.values())
     need += (0 if breakdown_time is None else breakdown_time.nbytes) + \
         (0 if state is None else sum(v.nbytes for v in state.values()))
-    last = f"{g.name.rsplit('/', 1)[-1]} t = {g['t'][-1]:g}" if g["t"].shape[0] else \
-        f"the pair before {g.name.rsplit('/', 1)[-1]}"
+    last = f"{g.name.rsplit('/', 1)[-1]} t = {g['t'][-1]:g}" if g["t"].shape[0] else None
+    if last is None:                      # this pair has no rows yet: name the last pair that has
+        names = list(f["runs"])
+        done = [k for k in names if f["runs"][k]["t"].shape[0]]
+        last = f"{done[-1]} t = {f['runs'][done[-1]]['t'][-1]:g}" if done else None
     ensure_space(f.filename, need, last)
     append(g, rows)
     if breakdown_time is not None:
@@ -418,7 +533,7 @@ def settle_checkpoint(g):
 
 def finish(path, names, n_outputs) -> list:
     """Write each pair's final status and wall_time; [(name, status, breakdowns, errors, wall time,
-    unresolved)] as :func:`pair_summary` gives them."""
+    unresolved, (first breakdown time or None, points))] as :func:`pair_summary` gives them."""
     out = []
     with h5py.File(path, "r+") as f:
         threshold = float(f.attrs.get("resolution_threshold", np.inf))
@@ -428,7 +543,9 @@ def finish(path, names, n_outputs) -> list:
             set_status(g, status, unresolved)
             wall = float(g["wall_clock"][0])
             g.attrs["wall_time"] = wall
-            out.append((name, status, broke, errs, wall, unresolved))
+            bt = g["breakdown_time"][...]
+            first = float(bt[np.isfinite(bt)].min()) if broke else None
+            out.append((name, status, broke, errs, wall, unresolved, (first, int(bt.size))))
     return out
 
 
@@ -457,6 +574,13 @@ class PairRun:
     points: dict
     under_resolved_from: dict = dataclasses.field(default_factory=dict)
 
+    def __repr__(self):
+        t = f"t = {self.t[0]:g} … {self.t[-1]:g}" if self.t.size else "no outputs"
+        forms = [f"{inv}: {', '.join(d)}" for inv, d in (("I1", self.I1), ("I2", self.I2)) if d]
+        return (f"<PairRun {self.name}: {self.status}, {self.t.size} outputs ({t}), "
+                f"{'; '.join(forms) or 'no invariants'}, {int(np.isfinite(self.breakdown_time).sum())} of "
+                f"{self.breakdown_time.size} points broke down>")
+
     def relative_error(self, inv="I1", form="noncanonical"):
         """|I(t) − I(0)| / |I(0)| of one invariant and form (:func:`relative_error`)."""
         return relative_error((self.I1 if inv == "I1" else self.I2)[form])
@@ -477,6 +601,14 @@ class Run:
     def __getitem__(self, name):
         return self.pairs[name]
 
+    def __repr__(self):
+        counts = {}
+        for p in self.pairs.values():
+            counts[p.status] = counts.get(p.status, 0) + 1
+        return (f"<Run '{self.path}': {self.system}, {len(self.pairs)} pairs "
+                f"({', '.join(f'{v} {k}' for k, v in counts.items())}), {self.steps} steps; "
+                "run.pairs by name, run[name] one pair>")
+
     def grid(self) -> tuple:
         """(tableaus, projections) in the scene's order (HDF5 lists the groups alphabetically); a
         user's step maps come last, under the projection 'map'."""
@@ -494,11 +626,17 @@ class Run:
             return tabs, projs
 
 
-def _read(g, name):
-    """A dataset's values; a failed checksum or a missing dataset is a DamagedFile naming it."""
+def _read(g, name, limit=None):
+    """A dataset's values; a failed checksum, a missing dataset or one that claims more bytes than
+    ``limit`` is a DamagedFile naming it."""
     try:
-        return g[name][...]
-    except (OSError, KeyError) as exc:
+        ds = g[name]
+        if limit is not None:
+            check_size(ds, limit)
+        return ds[...]
+    except DamagedFile:
+        raise
+    except (OSError, KeyError, ValueError, RuntimeError, MemoryError) as exc:
         raise DamagedFile(f"'{g.file.filename}' is damaged: cannot read {g.name}/{name} "
                           f"({plain_error(exc)})") from None
 
@@ -509,26 +647,28 @@ def read_run(path) -> Run:
     A damaged dataset (failed checksum) or a file that is not a run file is one :class:`DamagedFile`
     naming it.  Pairs still ``pending`` are read as far as they got.
     """
+    limit = size_limit(path) if os.path.exists(path) else 0
     try:
-        with h5py.File(path, "r") as f:
+        with open_file(path) as f:
             fmt = f.attrs.get("format")
             if fmt not in (FORMAT, "poincare/1"):
                 raise DamagedFile(f"'{path}' is not a poincare run file")
             pairs = {}
             for name, g in f["runs"].items():
                 def sets(key):
-                    return {k: _read(g, f"{key}/{k}") for k in g[key]} if key in g else {}
+                    return {k: _read(g, f"{key}/{k}", limit) for k in g[key]} if key in g else {}
                 pairs[name] = PairRun(
                     name=name, status=str(g.attrs.get("status", "pending")),
-                    wall_time=float(_read(g, "wall_clock")[0]), t=_read(g, "t"), I1=sets("I1"), I2=sets("I2"),
+                    wall_time=float(_read(g, "wall_clock", limit)[0]), t=_read(g, "t", limit), I1=sets("I1"), I2=sets("I2"),
                     resolution=sets("resolution"), resolved=sets("resolved"),
-                    errors={k[:-len("_error")]: _read(g, k) for k in g if k.endswith("_error")},
-                    breakdown_time=_read(g, "breakdown_time"), points=sets("points"),
+                    errors={k[:-len("_error")]: _read(g, k, limit) for k in g if k.endswith("_error")},
+                    breakdown_time=_read(g, "breakdown_time", limit), points=sets("points"),
                     under_resolved_from={k.split("/")[1]: float(v) for k, v in g.attrs.items()
                                          if k.startswith("under_resolved_from/")})
             return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
                        scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
-    except DamagedFile:
+    except (DamagedFile, BusyFile, FileNotFoundError):
         raise
-    except (OSError, KeyError) as exc:
-        raise DamagedFile(f"cannot read '{path}': damaged or not a poincare run file ({plain_error(exc)})") from None
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError, MemoryError) as exc:
+        raise DamagedFile(f"cannot read '{path}': damaged or not a poincare run file "
+                          f"({type(exc).__name__}: {plain_error(exc)})") from None

@@ -3,8 +3,8 @@
 * ``<stem>_I1_<form>.png``, ``<stem>_I2_<form>.png``: the paper's figure grid — rows are
   projections, columns are tableaus — of the relative invariant error |I(t) − I(0)|/|I(0)|
   against time, log scale (errors span decades; exact zeros are drawn at 1e-17).  Outputs at
-  which the set was under-resolved are shaded grey; a pair that is not ``ok`` is labelled
-  with its status.  A damaged file (failed checksum, missing datasets) is one error line.
+  which the set was under-resolved are shaded grey, outputs from its first broken-down point on
+  red; a pair that is not ``ok`` is labelled with its status.  A damaged file (failed checksum, missing datasets) is one error line.
 * ``<stem>_diagnostics.png``: energy, momentum and constraint errors, one panel each, every pair.
 * ``<stem>_points.png``: the loop and the surface in the (q¹, q²) plane at five output times,
   when the run stored its points.
@@ -44,7 +44,7 @@ def _stretches(t, bad):
 
 def _grid(run, inv, form, out):
     tabs, projs = run.grid()
-    shaded = False
+    shaded = shaded_broke = False
     fig, axes = plt.subplots(len(projs), len(tabs), figsize=(max(3.4 * len(tabs), 6.0), 2.3 * len(projs) + 0.6),
                              sharex=True, sharey=True, squeeze=False)
     for i, p in enumerate(projs):
@@ -54,8 +54,12 @@ def _grid(run, inv, form, out):
             values = None if pr is None else (pr.I1 if inv == "I1" else pr.I2).get(form)
             if values is not None:
                 ax.semilogy(pr.t, np.maximum(relative_error(values), FLOOR), lw=0.9)
+                broke = ~np.isfinite(values)        # red from the set's first broken point on (no invariant)
+                for a, b in _stretches(pr.t, broke):
+                    ax.axvspan(a, b, color="C3", alpha=0.18, lw=0, label="broken down")
+                    shaded_broke = True
                 if inv in pr.resolved:              # grey where the set did not resolve its invariant
-                    for a, b in _stretches(pr.t, pr.resolved[inv] == 0):
+                    for a, b in _stretches(pr.t, (pr.resolved[inv] == 0) & ~broke):
                         ax.axvspan(a, b, color="0.6", alpha=0.35, lw=0, label="under-resolved")
                         shaded = True
                 status = pr.status
@@ -73,11 +77,17 @@ def _grid(run, inv, form, out):
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylim(FLOOR / 2, None)
     fig.suptitle(f"{'first' if inv == 'I1' else 'second'} Poincaré invariant {inv}, {form} form: "
-                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|" + ("\n(grey: the set is under-resolved there)" if shaded else ""),
+                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|" + _caption(shaded, shaded_broke),
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
+
+
+def _caption(under, broke):
+    parts = (["grey: the set is under-resolved there"] if under else []) + \
+        (["red: points of the set broke down, no invariant"] if broke else [])
+    return f"\n({'; '.join(parts)})" if parts else ""
 
 
 def _diagnostics(run, out):

@@ -1,16 +1,15 @@
 """User code named on the command line or in a scene: ``module:function`` or ``path/to/file.py:function``.
 
 One loader for every place a function is accepted (step maps for ``poincare audit``, loop and
-surface shapes in scenes).  A module is imported with the current directory first on the path,
-as ``python -c`` would (the ``poincare`` console script alone would not see it); a relative
-``file.py`` is looked up in ``base`` (a scene file's directory) and then in the current
-directory.  Every failure is one ValueError naming the spec.
+surface shapes and systems in scenes).  A scene that names code runs it, like a script, so the
+code must be the user's own: a relative ``file.py`` or a ``module`` (as ``module.py`` or a
+package folder) is looked up in ``base`` (a scene file's directory) and then in the current
+directory, and nowhere else; installed modules are refused.  Every failure is one ValueError
+naming the spec.
 """
 from __future__ import annotations
 
-import importlib
 import importlib.util
-import os
 import sys
 from pathlib import Path
 from typing import Callable
@@ -21,36 +20,59 @@ def is_spec(text: str) -> bool:
     return isinstance(text, str) and ":" in text and not text.endswith(":")
 
 
+LOADED: dict = {}        # {(key, spec): '/path/to/file.py:function'}: the user code this process ran
+
+
+def _module_file(mod_name, places):
+    """The file of module ``a.b.c`` under one of ``places``: a/b/c.py or a/b/c/__init__.py, or None."""
+    rel = Path(*mod_name.split("."))
+    for place in places:
+        for cand in (place / rel.with_suffix(".py"), place / rel / "__init__.py"):
+            if cand.is_file():
+                return cand
+    return None
+
+
 def load_callable(spec: str, what: str = "function", base: str | Path | None = None) -> Callable:
-    """The callable named by ``spec``; ``what`` names it in errors ("step map", "loop.shape")."""
+    """The callable named by ``spec``; ``what`` names it in errors ("step map", "loop.shape").
+
+    User code runs, like a script, only from where the user put it: ``file.py`` next to the scene
+    (``base``) or in the current directory (or an absolute path), ``module`` (dotted: a package's
+    module) as a ``.py`` file or package found there.  An installed module (``builtins:print``,
+    ``os:system``) is refused: a scene names code of its own, not the machine's.  What was loaded
+    is recorded in :data:`LOADED` for the run's summary."""
     if not is_spec(spec):
         raise ValueError(f"{what} '{spec}' must be given as module:function or file.py:function")
     mod_name, func_name = spec.rsplit(":", 1)
+    places = [*([Path(base)] if base is not None else []), Path.cwd()]
     try:
         if mod_name.endswith(".py"):
             path = Path(mod_name)
-            candidates = [path] if path.is_absolute() else \
-                [*([Path(base) / path] if base is not None else []), Path.cwd() / path]
+            candidates = [path] if path.is_absolute() else [place / path for place in places]
             found = next((c for c in candidates if c.is_file()), None)
             if found is None:
                 raise ValueError(f"{what}: file '{mod_name}' not found"
                                  + (f" (looked in {', '.join(str(c.parent) for c in candidates)})" if candidates else ""))
-            key = f"_poincare_user_{abs(hash(str(found.resolve())))}"
-            module = sys.modules.get(key)
-            if module is None:
-                spec_ = importlib.util.spec_from_file_location(key, found)
-                module = importlib.util.module_from_spec(spec_)
-                spec_.loader.exec_module(module)
-                sys.modules[key] = module
         else:
-            added = os.getcwd() not in sys.path and "" not in sys.path
-            if added:
-                sys.path.insert(0, os.getcwd())
+            if not all(part.isidentifier() for part in mod_name.split(".")):
+                raise ValueError(f"{what}: '{mod_name}' is not a module name")
+            found = _module_file(mod_name, places)
+            if found is None:
+                raise ValueError(f"{what}: module '{mod_name}' is not a .py file or package in "
+                                 f"{' or '.join(str(p) for p in dict.fromkeys(places))}; a scene runs only code of "
+                                 "its own from there, never an installed module")
+        found = found.resolve()
+        key = f"_poincare_user_{abs(hash(str(found)))}"
+        module = sys.modules.get(key)
+        if module is None:
+            spec_ = importlib.util.spec_from_file_location(key, found)
+            module = importlib.util.module_from_spec(spec_)
+            sys.modules[key] = module
             try:
-                module = importlib.import_module(mod_name)
-            finally:
-                if added:
-                    sys.path.remove(os.getcwd())
+                spec_.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[key]
+                raise
     except ValueError:
         raise
     except Exception as exc:   # the user's module failed to import: say why in one line
@@ -58,4 +80,5 @@ def load_callable(spec: str, what: str = "function", base: str | Path | None = N
     fn = getattr(module, func_name, None)
     if not callable(fn):
         raise ValueError(f"{what}: '{mod_name}' has no function '{func_name}'")
+    LOADED[(what, spec)] = f"{found}:{func_name}"
     return fn

@@ -21,14 +21,16 @@ A scene file::
     params = { omega = 2.0 }              # passed to it as keyword arguments
 
     [loop]                                # optional: a closed loop of sample points
-    shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function" returning (N, d)
+    shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function": called as
+                                          # f(tau, **params), tau the (N,) array j/N in [0, 1), returning (N, d)
     points = 2000
     params = { rx = 0.5 }                 # optional shape parameters; any system: shape = "ellipse" with
                                           # params = { d = 2, center = [1.0, 1.0], radii = [0.04, 0.04], plane = [0, 1] }
 
     [surface]                             # optional: a surface of n_sigma × n_tau Chebyshev points
     shape = "guiding_centre"              # or "rectangle" (params d, center, size, plane), or "module:function" /
-                                          # "file.py:function" taking (S, T), returning (nσ, nτ, d)
+                                          # "file.py:function": f(S, T, **params), two (nσ, nτ) arrays of
+                                          # Chebyshev points in [0, 1], returning (nσ, nτ, d)
     n_sigma = 100
     n_tau = 100
 
@@ -39,8 +41,10 @@ A scene file::
                                           # (the audit's contract), run as the pair "leapfrog-map"
     h = 10.0
     steps = 1000
-    output_every = 10                     # steps between outputs
-    forms = ["canonical", "noncanonical", "corrected"]
+    output_every = 10                     # steps between outputs (default steps/100); when steps is not a
+                                          # multiple, the last interval is shorter and ends at run.steps
+    forms = ["canonical", "noncanonical", "corrected"]   # default: canonical and noncanonical only
+                                          # ("corrected" costs ϑ_qq at every output: ask for it)
     diagnostics = ["energy", "momentum", "constraint"]   # default: all three ("momentum" only where the
                                           # system has one: a symmetry or a momentum expression)
     store_points = false                  # also store every sample point at every output
@@ -51,7 +55,9 @@ A scene file::
                                           # end); 0: at every output.  A kill loses at most this much work.
 
 Files named in a scene (tableaus, file.py:function) are looked up next to the scene file, then in
-the current directory.  Every mistake is a :class:`SceneError` whose message names the key; an
+the current directory.  A scene that names Python code (file.py:function, module:function) runs
+it, like a script: only code found there (never an installed module), and the run's summary
+lists it.  Strings (expressions, tableau entries) are data: a restricted parser reads them.  Every mistake is a :class:`SceneError` whose message names the key; an
 expression that does not parse, an unknown name, an odd dimension or an Ω̄ that is singular at a
 sample point are refused before anything runs.
 """
@@ -59,6 +65,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from pathlib import Path
 
@@ -370,6 +377,9 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
             if why:
                 raise SceneError(f"run: {why}")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
+    for key, value in (("name", name), ("system.name", sysd.get("name", ""))):
+        if not value.isprintable():
+            raise SceneError(f"'{key}' holds control characters (a newline or a terminal escape): {value!r}")
     out = data.get("output", {}).get("path", f"{name}.h5")
     ck_seconds = float(data.get("output", {}).get("checkpoint_seconds", CHECKPOINT_SECONDS))
     if not (math.isfinite(ck_seconds) and ck_seconds >= 0):
@@ -379,6 +389,7 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
                   checkpoint_seconds=ck_seconds,
                   base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps)
+    _check_memory(scene, system)
     _check_points(scene, system)
     for label in {step_map_label(m) for m in maps}:
         scene.step_map(label)             # import now: a missing file or function is a one-line error
@@ -405,7 +416,10 @@ def _make_system(spec, params, base):
             raise SceneError(f"system '{spec['function']}' failed: {type(exc).__name__}: {exc}") from None
         if not isinstance(made, System):
             raise SceneError(f"system '{spec['function']}' must return an integrators.System, got {type(made).__name__}")
-        return made
+        try:
+            return made.validate()
+        except ValueError as exc:
+            raise SceneError(f"system '{spec['function']}': {exc}") from None
     if "coordinates" in spec:
         return _system_from_table(spec, params)
     try:
@@ -477,7 +491,7 @@ def _tableaus(entries, base):
                 raise SceneError(f"run.tableaus: tableau file '{e}' not found "
                                  f"(looked in {', '.join(str(c.parent) for c in cands)})")
             label = _tableau_file(found).name
-            if not label or "/" in label or label in SYSTEM_NAMES:
+            if not label or "/" in label or label in SYSTEM_NAMES or not label.isprintable():
                 raise SceneError(f"run.tableaus: '{e}' has the unusable name {label!r}")
             files[label] = str(found.resolve())
         else:
@@ -492,6 +506,70 @@ def _tableaus(entries, base):
     return tuple(labels), files
 
 
+MEMORY_BASE = 400 * 2**20        # the interpreter, numpy, numba, MPI and HDF5 of one rank (measured ~300 MiB)
+
+
+def memory_per_point(d, s) -> tuple:
+    """(bytes one sample point costs the rank that advances it, bytes of its state).  The cost: its
+    state (:class:`integrators.engine.State`), Newton factors of a pair with s stages (assuming the
+    largest system a projection solves, (s + 2)·d unknowns) and its part of the invariants'
+    transforms (about 20 arrays of d doubles).  For GLRK2 on a 4-dimensional system this gives
+    3.1 KiB; measured 1.8-2.3 KiB (docs/benchmarks.md)."""
+    from ..engine import State
+    nz = (s + 2) * d
+    state = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, d, s).values())
+    return state + 8 * (nz * nz + nz) + 8 * 20 * d, state
+
+
+def available_memory() -> float | None:
+    """Bytes of memory available to new work on this node (MemAvailable), or None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _local_ranks() -> int:
+    """Ranks that share this node under mpiexec (MPICH and Open MPI say so in the environment), else 1."""
+    for key in ("MPI_LOCALNRANKS", "OMPI_COMM_WORLD_LOCAL_SIZE"):
+        try:
+            return max(1, int(os.environ[key]))
+        except (KeyError, ValueError):
+            pass
+    return 1
+
+
+def _check_memory(scene, system):
+    """Refuse, naming the key, a scene whose points cannot fit in this node's memory: every rank
+    holds all sample points (q₀, the sets' values) and its share of the states, rank 0 the whole
+    checkpoint as well.  Checked before any point is sampled or any file is written."""
+    free = available_memory()
+    if free is None:
+        return
+    n, d = scene.n_points, system.d
+    s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
+    local = _local_ranks()
+    per_point, state = memory_per_point(d, s)
+    # every local rank holds all points' samples and set values (~16 arrays of d doubles) and
+    # advances its share; rank 0 also gathers every point's state for a checkpoint
+    need = local * (MEMORY_BASE + 8 * 16 * d * n) + (per_point + state) * n
+    if need <= free:
+        return
+    big = max((sp for sp, _ in scene.sample_sets), key=lambda sp: sp.count)
+    key = ("loop.points = " if big.name == "loop" else
+           f"surface.n_sigma × surface.n_tau = {big.n_sigma} × {big.n_tau} = ") + f"{big.count:,}"
+    raise SceneError(f"{key} needs about {need / 2**30:,.1f} GiB of memory for {n:,} points "
+                     f"({per_point / 1024:.1f} KiB a point{f' on {local} ranks' if local > 1 else ''}); "
+                     f"this node has {free / 2**30:,.1f} GiB available: use fewer points")
+
+
 def _check_points(scene, system):
     for spec, _ in scene.sample_sets:
         what = spec.name
@@ -500,8 +578,14 @@ def _check_points(scene, system):
         except SceneError:
             raise
         except Exception as exc:      # a user shape function may raise anything: one line naming it
-            who = f"{what}.shape '{spec.shape}'" if ":" in spec.shape else what
-            raise SceneError(f"{who} failed: {type(exc).__name__}: {exc}") from None
+            if ":" not in spec.shape:
+                msg = str(exc)
+                raise SceneError(f"{what}.{msg}" if msg.startswith("params") else f"{what}: {msg}") from None
+            contract = ("f(tau, **params) with tau the (N,) array j/N in [0, 1), returning (N, d)"
+                        if what == "loop" else "f(sigma, tau, **params) with two (n_sigma, n_tau) arrays of "
+                        "Chebyshev points in [0, 1], returning (n_sigma, n_tau, d)")
+            raise SceneError(f"{what}.shape '{spec.shape}' failed: {type(exc).__name__}: {exc} (a {what} shape "
+                             f"is called as {contract})") from None
         want = spec.grid + (system.d,)
         if q.shape[-1:] == (system.d,) and q.shape != want:
             raise SceneError(f"{what}: the shape gives points of shape {q.shape}, the scene needs {want}")
@@ -553,7 +637,9 @@ def load_scene(spec: str | None) -> Scene:
         if not path.exists():
             raise SceneError(f"scene '{spec}' is neither a file nor a built-in scene ({', '.join(scenes)})")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"scene '{spec}' is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
-        raise SceneError(f"cannot read scene '{spec}': {exc}") from None
+        raise SceneError(f"cannot read scene '{spec}': {exc.strerror or exc}") from None
     return parse_scene(text, origin=str(path))
