@@ -187,7 +187,7 @@ def test_cli_audit_user_function(tmp_path, capsys):
 @pytest.mark.parametrize("args, msg", [
     (["audit", "NOPE"], "is not a built-in tableau"),
     (["audit", f"{TESTS / 'audit_maps.py'}:nothing"], "has no function 'nothing'"),
-    (["audit", "no_such_module_xyz:f"], "cannot import"),
+    (["audit", "no_such_module_xyz:f"], "is not a .py file or package in"),
     (["audit", "GLRK2", "--projection", "sideways"], "unknown projection"),
     (["audit", "RadIIA2", "--projection", "symmetric"], "none of symmetric applies"),
     (["audit", "GLRK2", "--reference", "GLRK2"], "must be TABLEAU-projection"),

@@ -344,6 +344,10 @@ def test_a_file_another_run_is_writing_is_called_busy_not_damaged(tmp_path):
         r = poincare("run", "lv.toml", "-o", str(out), "--resume", "-q", cwd=tmp_path)
         assert r.returncode == 2
         one_line(r, "another process")
+        before = out.read_bytes()
+        r = poincare("run", "lv.toml", "-o", str(out), "--force", "-q", cwd=tmp_path)
+        assert r.returncode == 2 and out.read_bytes() == before
+        one_line(r, "another process")
     finally:
         holder.kill()
         holder.wait()

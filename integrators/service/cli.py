@@ -116,6 +116,8 @@ def cmd_run(args) -> int:
     from .driver import run
     from .ranks import communicator
     from .scene import load_scene
+    from .plugins import LOADED
+    LOADED.clear()                  # the summary lists the code this scene loads
     comm = communicator()
     scene = load_scene(args.scene)
     out = args.output or scene.output

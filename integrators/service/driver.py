@@ -91,6 +91,13 @@ def _check_output(path, resume, force):
         return f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
     if resume and not path.exists():
         return f"cannot resume: '{path}' does not exist"
+    if force and path.exists():          # never replace a file another run is still writing
+        try:
+            output.open_file(path).close()
+        except output.BusyFile as exc:
+            return str(exc)
+        except (ValueError, OSError):    # damaged or not HDF5: --force is for that
+            pass
     return None
 
 

@@ -39,7 +39,10 @@ dozen numbers, a state about 300 bytes a point.  A checkpoint slot is first mark
 (step = −1), then written, then given its step; resume uses the newest valid slot, drops the rows
 written after it and computes them again.  Every output starts the next step from fresh Newton
 Jacobians, so a run resumed from any output is bitwise the uninterrupted one, and how often the
-state is written changes no result.  A finished pair keeps its final state in slot a, slot b empty.
+state is written changes no result.  A finished pair keeps its final state in slot a, slot b empty;
+when ``run.steps`` is not a multiple of ``run.output_every`` the state kept is the one at the last
+multiple (the driver's ``last_checkpoint_step``): the last, shorter interval is recomputed by a
+resume, and a longer run goes on from there with the straight run's bits.
 """
 from __future__ import annotations
 
@@ -465,7 +468,7 @@ def restart_pair(f, name, output_every, finished_too=False):
     if g.attrs["status"] in FINISHED and not finished_too:
         return None
     g.attrs["status"] = "pending"
-    if step is None or step % output_every:      # (a state off the cadence, from before 0.1.1: start again)
+    if step is None or step % output_every:      # (a state off the cadence, from an older version: start again)
         truncate(g, 0)
         g["breakdown_time"][...] = np.inf
         return 0, None
