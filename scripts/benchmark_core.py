@@ -5,7 +5,7 @@
 Measured in one run on this machine, every number next to the one it is compared with:
 
 * throughput on guiding_centre_symmetric (h = 10, 10,000 points near the default loop, 10 steps
-  after 2 warm-up steps): compiled on 1 and 2 threads, the numpy engine (tests/numpy_engine.py,
+  after 2 warm-up steps): compiled on 1 and 2 threads, the numpy engine (tests/reference.py,
   the engine every run used before), for every projection with GLRK1, GLRK2, SRK3 and GLRK4;
 * one trajectory: steps per second of each engine (10⁵ steps compiled, 300 numpy), and the
   wall time of 10⁶ steps of the barely passing tokamak orbit with GLRK2-symmetric;
@@ -36,8 +36,7 @@ import invariants
 from integrators.engine import get_threads, march, set_threads
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-import numpy_engine  # noqa: E402  (the oracle: the numpy engine as it ran every pair before)
+from integrators import reference
 
 
 def points(n, rng):
@@ -58,13 +57,13 @@ def compiled_rate(system, q, tab, proj, h, steps, threads):
 
 
 def numpy_rate(system, q, tab, proj, h, steps):
-    stepper = numpy_engine.Stepper(system, integrators.tableau(tab), proj, h)
-    st = numpy_engine.State(q, system.theta(q), np.zeros_like(q), h, stepper.s)
+    stepper = reference.Stepper(system, integrators.tableau(tab), proj, h)
+    st = reference.State(q, system.theta(q), np.zeros_like(q), h, stepper.s)
     for k in range(2):
-        numpy_engine.advance(stepper, st, (k + 1) * h)
+        reference.advance(stepper, st, (k + 1) * h)
     t0 = time.perf_counter()
     for k in range(steps):
-        numpy_engine.advance(stepper, st, (k + 3) * h)
+        reference.advance(stepper, st, (k + 3) * h)
     return q.shape[0] * steps / (time.perf_counter() - t0)
 
 

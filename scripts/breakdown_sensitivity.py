@@ -13,7 +13,7 @@ For each: the breakdown step (or "completed") of every point, and the spread ove
 
     python scripts/breakdown_sensitivity.py --newton-tol 8.9e-16 1e-12 1e-10 [--steps 150000]
 
-runs GLRK2 instead on the numpy engine of tests/numpy_engine.py (the compiled engine's oracle, same
+runs GLRK2 instead on the numpy engine of tests/reference.py (the compiled engine's oracle, same
 rules; its tolerance is a keyword there, a compile-time constant in the kernel) with Newton's
 convergence tolerance set to each value: max |δ|/scale ≤ tol (4 eps = 8.9e-16 in both engines).
 
@@ -62,22 +62,19 @@ def summary(name, steps_list, total):
 
 def newton_tolerance(args):
     """GLRK2 unprojected on the numpy engine with each Newton tolerance: the breakdown step."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import numpy_engine
+    from integrators import reference
     system = integrators.system("lotka_volterra_2d")
     h, q = 0.1, np.array([[1.0, 1.0]])
     out = []
     for tol in args.newton_tol:
-        numpy_engine.newton.__kwdefaults__["tol"] = tol
-        st = numpy_engine.Stepper(system, integrators.tableau("GLRK2"), "none", h)
-        S = numpy_engine.State(q, system.theta(q), np.zeros_like(q), h, st.s)
+        reference.newton.__kwdefaults__["tol"] = tol
+        st = reference.Stepper(system, integrators.tableau("GLRK2"), "none", h)
+        S = reference.State(q, system.theta(q), np.zeros_like(q), h, st.s)
         t0 = time.perf_counter()
         k = 0
         while S.live[0] and k < args.steps:
             k += 1
-            numpy_engine.advance(st, S, k * h)
+            reference.advance(st, S, k * h)
             if k % 1000 == 0:
                 S.forget_jacobians()          # as the compiled engine does at each output
         row = dict(tol=tol, breakdown_step=None if S.live[0] else k, steps=args.steps,
@@ -92,23 +89,20 @@ def newton_tolerance(args):
 
 def stopping_rule(args):
     """Unprojected pairs on the numpy engine taking unconverged steps instead of stopping."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import numpy_engine
+    from integrators import reference
     system = integrators.system("lotka_volterra_2d")
     h, q = 0.1, np.array([[1.0, 1.0]])
     H0 = system.H(q)[0]
     out = []
     for name in args.pairs:
-        st = numpy_engine.Stepper(system, integrators.tableau(name), "none", h, accept_unconverged=True)
-        S = numpy_engine.State(q, system.theta(q), np.zeros_like(q), h, st.s)
+        st = reference.Stepper(system, integrators.tableau(name), "none", h, accept_unconverged=True)
+        S = reference.State(q, system.theta(q), np.zeros_like(q), h, st.s)
         t0 = time.perf_counter()
         first, k, tenth = None, 0, max(1, args.steps // 10)
         worst, maxima = 0.0, []
         while S.live[0] and k < args.steps:
             k += 1
-            numpy_engine.advance(st, S, k * h)
+            reference.advance(st, S, k * h)
             if first is None and st.unconverged:
                 first = k
             if k % 1000 == 0:

@@ -13,7 +13,7 @@ the quantity's round-off floor (FLOORS: where double-precision round-off of the 
     python scripts/convergence.py --from-json   # docs/convergence.md from the two JSON files
 
 --extended runs every pair again in x87 long double (64-bit significand: round-off 2,000 times below
-double's) on the numpy engine of tests/numpy_engine.py (the compiled engine's oracle, same equations,
+double's) on the numpy engine of tests/reference.py (the compiled engine's oracle, same equations,
 Newton to 4 eps of long double) for h = 2^-1 … 2^-7, with the errors against the same 30-digit
 reference (π as the double the generated code uses) and the energy and momentum evaluated in long
 double; the floors are FLOORS_LD, double's scaled by the ratio of the two eps.
@@ -145,8 +145,7 @@ def main():
 
 def extended():
     """Every pair in long double on the numpy engine: errors and orders (docs/figures/convergence_extended.json)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import numpy_engine
+    from integrators import reference
     sy = integrators.system("point_vortices")
     q0 = np.array(sy.defaults["q0"])
     t_start = time.time()
@@ -159,11 +158,11 @@ def extended():
         for proj in PROJ:
             errs = {"solution": [], "energy": [], "momentum": []}
             for h in HS_LD:
-                st = numpy_engine.Stepper(sy, integrators.tableau(tab), proj, h)
-                S = numpy_engine.State(ql, sy.theta(ql), np.zeros_like(ql), h, st.s)
+                st = reference.Stepper(sy, integrators.tableau(tab), proj, h)
+                S = reference.State(ql, sy.theta(ql), np.zeros_like(ql), h, st.s)
                 eH = eP = np.longdouble(0)
                 for k in range(1, round(T / h) + 1):
-                    numpy_engine.advance(st, S, k * h)
+                    reference.advance(st, S, k * h)
                     eH, eP = max(eH, abs(sy.H(S.q)[0] - H0)), max(eP, abs(sy.momentum(S.q)[0] - P0))
                 ok = bool(S.live[0])
                 errs["solution"].append(float(np.max(np.abs(S.q[0] - ref))) if ok else np.nan)

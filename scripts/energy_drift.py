@@ -17,7 +17,7 @@ eq:vprk_coefficients holds in floating point; ``Tableau.conjugated``).  The tabl
 floating-point symplecticity residual max |b_i ā_ij + b_j a_ji − b_i b_j|.
 
 ``extended``: the same orbit in x87 long double (64-bit significand, eps 1.1e-19, 2,000 times
-smaller than double's) on the numpy engine of tests/numpy_engine.py (the compiled engine's oracle,
+smaller than double's) on the numpy engine of tests/reference.py (the compiled engine's oracle,
 the same equations; Newton to 4 eps of long double), beside the compiled double run of the same
 steps.  Both energies are evaluated in long double.  "round-off part" is max |H(q_double) −
 H(q_long double)|/|H₀| over each interval: the double run's energy error minus the reference's.  The
@@ -83,8 +83,7 @@ def double(args):
 
 
 def extended(args):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import numpy_engine
+    from integrators import reference
     every = max(1, args.steps // 4000)
     sy = integrators.system("guiding_centre_tokamak")
     out = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
@@ -92,12 +91,12 @@ def extended(args):
         tab = integrators.tableau(name)
         qd, wall_d, broke_d = double_run(tab, args.steps, every)
         q = np.array([Q0], dtype=np.longdouble)
-        st = numpy_engine.Stepper(sy, tab, "symmetric", H_STEP)
-        S = numpy_engine.State(q, sy.theta(q), np.zeros_like(q), H_STEP, st.s)
+        st = reference.Stepper(sy, tab, "symmetric", H_STEP)
+        S = reference.State(q, sy.theta(q), np.zeros_like(q), H_STEP, st.s)
         saved = [S.q[0].copy()]
         t0 = time.perf_counter()
         for k in range(1, args.steps + 1):
-            numpy_engine.advance(st, S, k * H_STEP)
+            reference.advance(st, S, k * H_STEP)
             if not S.live[0]:
                 break
             if k % every == 0:

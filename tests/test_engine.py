@@ -1,10 +1,9 @@
-"""The compiled step engine against its oracle, the numpy engine (tests/numpy_engine.py), and its
+"""The compiled step engine against its oracle, the numpy engine (tests/reference.py), and its
 own promises: bits independent of threads and blocks, one compilation for every pair, a disk cache
 keyed by the expressions, symbol names that never matter."""
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,8 +13,7 @@ import integrators
 from integrators.engine import generate_source, point_functions, set_threads
 from integrators.projections import PROJECTIONS, admission
 
-sys.path.insert(0, str(Path(__file__).parent))
-import numpy_engine  # noqa: E402
+from integrators import reference
 
 EPS = np.finfo(float).eps
 PAIRS = [(t, p) for t in integrators.TABLEAU_NAMES for p in PROJECTIONS
@@ -23,10 +21,10 @@ PAIRS = [(t, p) for t in integrators.TABLEAU_NAMES for p in PROJECTIONS
 
 
 def _oracle(system, tab, proj, h, q0, steps):
-    st = numpy_engine.Stepper(system, integrators.tableau(tab), proj, h)
-    S = numpy_engine.State(q0, system.theta(q0), np.zeros_like(q0), h, st.s)
+    st = reference.Stepper(system, integrators.tableau(tab), proj, h)
+    S = reference.State(q0, system.theta(q0), np.zeros_like(q0), h, st.s)
     for k in range(1, steps + 1):
-        numpy_engine.advance(st, S, k * h)
+        reference.advance(st, S, k * h)
     return S
 
 
@@ -185,10 +183,10 @@ def test_the_numpy_engine_in_long_double_has_no_double_round_off():
     err = {}
     for dt in (np.float64, np.longdouble):
         q = q0.astype(dt)
-        st = numpy_engine.Stepper(sy, integrators.tableau("GLRK6"), "symmetric", 2.0)
-        S = numpy_engine.State(q, sy.theta(q), np.zeros_like(q), 2.0, st.s)
+        st = reference.Stepper(sy, integrators.tableau("GLRK6"), "symmetric", 2.0)
+        S = reference.State(q, sy.theta(q), np.zeros_like(q), 2.0, st.s)
         for k in range(1, 51):
-            numpy_engine.advance(st, S, 2.0 * k)
+            reference.advance(st, S, 2.0 * k)
         assert S.q.dtype == dt and S.live.all()
         err[dt] = np.abs(S.q.astype(float) - exact)
     bound = np.spacing(np.abs(exact))             # z and u: one ulp of the exact value
