@@ -13,12 +13,12 @@ The batch-run service (scenes, the MPI driver, HDF5 output, plots, the CLI) is t
 the core imports either.
 """
 from .integrate import Solution, integrate
-from .engine import Engine, State, march, set_threads
+from .engine import Engine, State, Tolerances, march, set_threads
 from .projections import PROJECTIONS
 from .systems import SYSTEM_NAMES, System, system, system_from
 from .tableaus import TABLEAU_NAMES, Tableau, tableau, tableau_from_arrays, tableau_from_file
 
 __all__ = ["integrate", "Solution", "system", "system_from", "System", "SYSTEM_NAMES", "tableau",
-           "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Engine", "State", "march",
+           "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Engine", "State", "Tolerances", "march",
            "set_threads"]
 __version__ = "0.1.0"

@@ -22,9 +22,11 @@ same for any count).
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib.util
 import itertools
+import math
 import os
 import sys
 import time
@@ -234,13 +236,51 @@ class State:
                 u8(self.live), self.breakdown_time, self.iterations, self.steps, self.lu, self.piv, u8(self.have_lu))
 
 
+@dataclasses.dataclass(frozen=True)
+class Tolerances:
+    """Newton's stopping rule in the compiled engine, as runtime data (one compilation for any values).
+
+    tol : converged when max |δ|/scale ≤ tol (default 4 eps)
+    stall : ... or when ≤ stall and the update no longer halves (the round-off floor; default 1e-10)
+    stall_complex : the same for the audit's complex-step derivatives (default 1e-13)
+    maxiter : iterations before a step counts as failed (default 40)
+    refresh : a fresh Jacobian after an iteration that contracted by less than this (default 0.01)
+    accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
+        instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
+        non-finite value or outside the domain; scripts/breakdown_sensitivity.py --stopping-rule)
+
+    The defaults are the engine's since it was written: the same bits as before they were data.
+    """
+
+    tol: float = 4 * np.finfo(np.float64).eps
+    stall: float = 1e-10
+    stall_complex: float = 1e-13
+    maxiter: int = 40
+    refresh: float = 0.01
+    accept_unconverged: bool = False
+
+    def __post_init__(self):
+        for name in ("tol", "stall", "stall_complex", "refresh"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"Tolerances.{name} must be a finite number ≥ 0, got {v!r}")
+        if isinstance(self.maxiter, bool) or not isinstance(self.maxiter, (int, np.integer)) or self.maxiter < 1:
+            raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
+
+    def array(self) -> np.ndarray:
+        """[TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT]: what the kernel reads."""
+        return np.array([self.tol, self.stall, self.stall_complex, float(self.maxiter), self.refresh,
+                         1.0 if self.accept_unconverged else 0.0], dtype=np.float64)
+
+
 class Engine:
     """The step map Φ_h of one (tableau, projection) pair for a system, compiled.
 
-    ``advance(state, first, nsteps)`` advances every live point of ``state`` by ``nsteps`` steps.
+    ``advance(state, first, nsteps)`` advances every live point of ``state`` by ``nsteps`` steps;
+    ``tolerances`` (a :class:`Tolerances`) sets Newton's stopping rule.
     """
 
-    def __init__(self, system, tableau, projection, h):
+    def __init__(self, system, tableau, projection, h, tolerances=None):
         why = admission(tableau, projection)
         if why:
             raise ValueError(why)
@@ -256,6 +296,10 @@ class Engine:
                  tableau.d if lob else np.zeros(s), E)
         self.tab = np.concatenate([np.asarray(x, dtype=np.float64).ravel() for x in parts])
         self.k = np.array([float(v) for v in system.params.values()], dtype=np.float64)
+        self.tolerances = tolerances if tolerances is not None else Tolerances()
+        if not isinstance(self.tolerances, Tolerances):
+            raise ValueError(f"tolerances must be an integrators.engine.Tolerances, got {type(tolerances).__name__}")
+        self._cfg = self.tolerances.array()
         self._functions = {}
 
     def state(self, q, p=None, lam=None, dtype=np.float64):
@@ -272,7 +316,7 @@ class Engine:
             self._functions[cplx] = point_functions(self.system, cplx)
         ev, inside = self._functions[cplx]
         kernel.advance(ev, inside, self.k, self.tab, self.codes, self.h, float(t0), int(first), int(nsteps), cplx,
-                       int(block), state._tuple(self.nz), (0,) * self.system.d)
+                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg)
 
 
 class MapEngine:

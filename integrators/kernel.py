@@ -38,7 +38,8 @@ COMPLEX_STEP = 1e-30    # the audit's complex-step size: imaginary parts are der
 TOL = 4 * EPS           # converged when max |δ|/scale ≤ TOL
 STALL = 1e-10           # ... or when below STALL and the update no longer halves (round-off floor)
 STALL_COMPLEX = 1e-13   # complex step: a round-off floor counts only when it is a tight one
-MAXITER = 40
+MAXITER = 40            # (TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH: the defaults of
+#                         integrators.engine.Tolerances, which the kernel takes at run time)
 REFRESH = 0.01          # a fresh Jacobian when an iteration contracted by less than this factor.
 #                         (0.03 suited the numpy engine, whose Jacobians cost many numpy calls; compiled, a
 #                         fresh Jacobian is cheap enough that 0.01 is faster: GLRK1-none 8.0 -> 6.7 Newton
@@ -354,7 +355,7 @@ def _post(z, jac, r, J, ev, k, sig, d, w, L):
 
 
 @njit(**_OPTS)
-def _newton(mode, z, zev, r, scale, nz, J, piv, known, cplx, ev, k, h, tb, proj, d, s, w, L):
+def _newton(mode, z, zev, r, scale, nz, J, piv, known, cplx, ev, k, h, tb, proj, d, s, w, L, cfg):
     """Newton's method with the exact Jacobian, kept while it contracts (per point).
 
     ``mode`` 0 solves the step's equations (:func:`_main`), 1 the consecutive projection
@@ -363,13 +364,16 @@ def _newton(mode, z, zev, r, scale, nz, J, piv, known, cplx, ev, k, h, tb, proj,
     update by less than REFRESH.  Converged when max |δ|/scale ≤ TOL, or ≤ STALL once the update
     stops halving; for complex z the imaginary part, read as a derivative, must pass the same test.
     Returns (converged, iterations); the solution is ``zev``, the last iterate at which the
-    residual was evaluated, and every buffer the equations fill holds that evaluation.
+    residual was evaluated, and every buffer the equations fill holds that evaluation.  The
+    tolerances are runtime data, ``cfg`` = [TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT]
+    (:class:`integrators.engine.Tolerances`); with ACCEPT a finite iterate that has not converged
+    after MAXITER iterations is taken (GeometricIntegrators.jl's stopping rule).
     """
-    stall = STALL_COMPLEX if cplx else STALL
+    tol, stall, refresh = cfg[0], cfg[2] if cplx else cfg[1], cfg[4]
     previous = np.inf
     stale = not known
     its = 0
-    for _ in range(MAXITER):
+    for _ in range(int(cfg[3])):
         for i in range(nz):
             zev[i] = z[i]
         if mode == 0:
@@ -397,11 +401,11 @@ def _newton(mode, z, zev, r, scale, nz, J, piv, known, cplx, ev, k, h, tb, proj,
         if nan or not finite or not np.isfinite(size):
             return False, its
         theta = size / previous if np.isfinite(previous) else np.inf
-        if (size <= TOL) or (size <= stall and np.isfinite(theta) and theta > 0.5):
+        if (size <= tol) or (size <= stall and np.isfinite(theta) and theta > 0.5):
             return True, its
-        stale = np.isfinite(theta) and theta > REFRESH
+        stale = np.isfinite(theta) and theta > refresh
         previous = size
-    return False, its
+    return cfg[5] != 0 and its > 0, its
 
 
 # -- one step of one point --------------------------------------------------------------------
@@ -448,7 +452,7 @@ def _prepare(ev, k, q, p, lam, proj, d, w, L):
 
 
 @njit(**_OPTS)
-def _attempt(reuse, guess, mu0, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs):
+def _attempt(reuse, guess, mu0, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, cfg):
     """One step of a point from the stage guess (and μ guess); commits the new state when it
     succeeds.  Returns (ok, iterations)."""
     q, p, lam, qc, pc, Ys, mus, lu, piv, have = pt_ptrs
@@ -477,7 +481,8 @@ def _attempt(reuse, guess, mu0, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L
             z[iM + m] = mu0[m]
             sc = max(abs(pbar[m]), 1.0)
             scale[iM + m] = sc if np.isfinite(sc) else 1.0
-    ok, its = _newton(0, z, zev, r, scale, nz, lu, piv, reuse and have[0] != 0, cplx, ev, k, h, tb, proj, d, s, w, L)
+    ok, its = _newton(0, z, zev, r, scale, nz, lu, piv, reuse and have[0] != 0, cplx, ev, k, h, tb, proj, d, s, w, L,
+                      cfg)
     inc, pn, ln = _at(w, V + _INC * d), _at(w, V + _PN * d), _at(w, V + _LN * d)
     if coupled:                                 # Ψ_h and Λ solved together
         for m in range(d):
@@ -496,7 +501,7 @@ def _attempt(reuse, guess, mu0, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L
             sc = max(abs(qh[m]), 1.0)
             pscale[m] = sc if np.isfinite(sc) else 1.0
         ok1, its1 = _newton(1, pz, pzev, pr, pscale, d, _at(w, L[_PL]), ipiv, False, cplx, ev, k, h, tb, proj, d, s,
-                            w, L)
+                            w, L, cfg)
         ok = ok and ok1
         its += its1
         for m in range(d):
@@ -541,7 +546,7 @@ def _attempt(reuse, guess, mu0, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L
 
 
 @njit(**_OPTS)
-def _step(t_next, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, flags, tb_ptr, counts):
+def _step(t_next, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, flags, tb_ptr, counts, cfg):
     """Advance one point by one step.  A step that fails from the extrapolated guess (and the last
     step's Jacobian) is tried once more from h·q̇(q_n) with a fresh Jacobian; a point that still
     fails (Newton does not converge, a value is not finite, q leaves the domain) is frozen at its
@@ -562,12 +567,12 @@ def _step(t_next, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt
                 for j in range(1, s):
                     acc = acc + E[i * s + j] * Ys[j * d + m]
                 guess[i * d + m] = acc
-    ok, its = _attempt(True, guess, mus, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs)
+    ok, its = _attempt(True, guess, mus, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, cfg)
     counts[0] += its
     if not ok and not fresh:
         _first_guess(ev, k, q, h, guess, d, s, w, L, ipiv)
         ok, its = _attempt(False, guess, _at(w, L[_ZERO]), cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv,
-                           pt_ptrs)
+                           pt_ptrs, cfg)
         counts[0] += its
     have[0] = 1 if ok else 0
     if ok:
@@ -580,7 +585,7 @@ def _step(t_next, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt
 
 
 @njit(**_OPTS)
-def _block(W, RW, IP, CN, lo, hi, ev, inside, kp, h, tb, proj, t0, first, nsteps, cplx, st, d, s, nz, L):
+def _block(W, RW, IP, CN, lo, hi, ev, inside, kp, h, tb, proj, t0, first, nsteps, cplx, st, d, s, nz, L, cfg):
     """Points lo … hi − 1 of the state through ``nsteps`` steps, with the thread's scratch arrays.
 
     The scratch arrays are arguments (not locals) on purpose: the caller holds them for the whole
@@ -599,20 +604,21 @@ def _block(W, RW, IP, CN, lo, hi, ev, inside, kp, h, tb, proj, t0, first, nsteps
         CN[1] = 0
         for j in range(nsteps):
             if not _step(t0 + (first + j) * h, cplx, ev, inside, kp, h, tb, proj, d, s, nz, w, L, rw, ipiv,
-                         pt_ptrs, flags, _at(tbrk, pt), counts):
+                         pt_ptrs, flags, _at(tbrk, pt), counts, cfg):
                 break
         itn[pt] += CN[0]
         stp[pt] += CN[1]
 
 
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, k, tab, proj, h, t0, first, nsteps, cplx, block, st, dim):
+def advance(ev, inside, k, tab, proj, h, t0, first, nsteps, cplx, block, st, dim, tolerances):
     """Advance every live point of the state tuple ``st`` by ``nsteps`` steps, the step numbered
     ``first`` aiming at t0 + first·h.  Points are taken ``block`` at a time, blocks spread over
     the threads; a point's steps never depend on its block, its thread or its neighbours.
 
     st = (q, p, Lam, q_comp, p_comp, Y, mu, have_history, live, breakdown_time, iterations, steps,
-    lu, piv, have_lu), the boolean flags viewed as uint8.
+    lu, piv, have_lu), the boolean flags viewed as uint8.  ``tolerances``: Newton's [TOL, STALL,
+    STALL_COMPLEX, MAXITER, REFRESH, ACCEPT] as float64 (:class:`integrators.engine.Tolerances`).
     """
     q, Y, lu = st[0], st[5], st[12]
     n = q.shape[0]
@@ -621,7 +627,7 @@ def advance(ev, inside, k, tab, proj, h, t0, first, nsteps, cplx, block, st, dim
     s = Y.shape[1]
     nz = lu.shape[1]
     L = _layout(s, d, nz)
-    kp, tb = _at(k, 0), _at(tab, 0)
+    kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
     nblocks = (n + block - 1) // block
     for bi in prange(nblocks):
         W = np.zeros(L[_NBUF], q.dtype)
@@ -629,7 +635,7 @@ def advance(ev, inside, k, tab, proj, h, t0, first, nsteps, cplx, block, st, dim
         IP = np.zeros(d, np.int64)
         CN = np.zeros(2, np.int64)
         _block(W, RW, IP, CN, bi * block, min(n, (bi + 1) * block), ev, inside, kp, h, tb, proj, t0, first, nsteps,
-               cplx, st, d, s, nz, L)
+               cplx, st, d, s, nz, L, cfg)
 
 
 @njit(**_OPTS)

@@ -5,7 +5,7 @@
 Measured in one run on this machine, every number next to the one it is compared with:
 
 * throughput on guiding_centre_symmetric (h = 10, 10,000 points near the default loop, 10 steps
-  after 2 warm-up steps): compiled on 1 and 2 threads, the numpy engine (tests/reference.py,
+  after 2 warm-up steps): compiled on 1 and 2 threads, the numpy engine (integrators/reference.py,
   the engine every run used before), for every projection with GLRK1, GLRK2, SRK3 and GLRK4;
 * one trajectory: steps per second of each engine (10⁵ steps compiled, 300 numpy), and the
   wall time of 10⁶ steps of the barely passing tokamak orbit with GLRK2-symmetric;

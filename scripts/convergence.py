@@ -13,7 +13,7 @@ the quantity's round-off floor (FLOORS: where double-precision round-off of the 
     python scripts/convergence.py --from-json   # docs/convergence.md from the two JSON files
 
 --extended runs every pair again in x87 long double (64-bit significand: round-off 2,000 times below
-double's) on the numpy engine of tests/reference.py (the compiled engine's oracle, same equations,
+double's) on the numpy engine of integrators/reference.py (the compiled engine's oracle, same equations,
 Newton to 4 eps of long double) for h = 2^-1 … 2^-7, with the errors against the same 30-digit
 reference (π as the double the generated code uses) and the energy and momentum evaluated in long
 double; the floors are FLOORS_LD, double's scaled by the ratio of the two eps.

@@ -17,7 +17,7 @@ eq:vprk_coefficients holds in floating point; ``Tableau.conjugated``).  The tabl
 floating-point symplecticity residual max |b_i ā_ij + b_j a_ji − b_i b_j|.
 
 ``extended``: the same orbit in x87 long double (64-bit significand, eps 1.1e-19, 2,000 times
-smaller than double's) on the numpy engine of tests/reference.py (the compiled engine's oracle,
+smaller than double's) on the numpy engine of integrators/reference.py (the compiled engine's oracle,
 the same equations; Newton to 4 eps of long double), beside the compiled double run of the same
 steps.  Both energies are evaluated in long double.  "round-off part" is max |H(q_double) −
 H(q_long double)|/|H₀| over each interval: the double run's energy error minus the reference's.  The

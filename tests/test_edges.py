@@ -491,3 +491,8 @@ def test_the_readme_and_systems_doc_snippets_define_what_they_use(tmp_path):
     for code in blocks:
         r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]
+
+
+def test_an_expression_not_finite_at_the_sample_points_is_refused():
+    with pytest.raises(SceneError, match=r"^loop: system.H is not finite at point 0 = \[0.55, 0.5\]"):
+        parse_scene(USER.replace('H = "x^2 + y^2"', 'H = "sqrt(x - 10) + y^2"'))

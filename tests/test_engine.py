@@ -1,4 +1,4 @@
-"""The compiled step engine against its oracle, the numpy engine (tests/reference.py), and its
+"""The compiled step engine against its oracle, the numpy engine (integrators/reference.py), and its
 own promises: bits independent of threads and blocks, one compilation for every pair, a disk cache
 keyed by the expressions, symbol names that never matter."""
 import os
@@ -193,3 +193,33 @@ def test_the_numpy_engine_in_long_double_has_no_double_round_off():
     bound[:, :2] = 2 * np.spacing(np.hypot(exact[:, 0], exact[:, 1]))[:, None]   # x, y: a rotation's rounding
     assert np.all(err[np.longdouble] <= bound)
     assert err[np.float64].max() < 1e-12
+
+
+def test_tolerances_are_runtime_data():
+    """Newton's stopping rule as data (integrators.Tolerances): one compilation for any values; a
+    looser tol costs fewer iterations and moves the result by about that much; maxiter = 1 fails
+    every step (Newton does not converge in one iteration from the guess), unless unconverged
+    iterates are accepted, and then every point goes on, one iteration a step."""
+    sy = integrators.system("guiding_centre_symmetric")
+    q0 = np.array(sy.defaults["q0"]) + 1e-2 * np.random.default_rng(5).standard_normal((8, 4))
+    tab = integrators.tableau("GLRK2")
+
+    def run(tol=None, steps=10):
+        e = integrators.Engine(sy, tab, "none", 10.0, tolerances=tol)
+        st = e.state(q0)
+        e.advance(st, 1, steps)
+        return st
+
+    ref = run()
+    assert np.array_equal(run(integrators.Tolerances()).q, ref.q)
+    assert np.array_equal(run(integrators.Tolerances(tol=4 * EPS, maxiter=40)).q, ref.q)
+    loose = run(integrators.Tolerances(tol=1e-8, stall=1e-8))
+    assert loose.live.all() and loose.iterations.sum() < ref.iterations.sum()
+    assert 0 < np.max(np.abs(loose.q - ref.q)) < 1e-6
+    one = run(integrators.Tolerances(maxiter=1))
+    assert not one.live.any() and np.all(one.breakdown_time == 10.0)
+    taken = run(integrators.Tolerances(maxiter=1, accept_unconverged=True))
+    assert taken.live.all() and np.all(taken.iterations == 10) and np.all(taken.steps == 10)
+    for bad in (dict(tol=-1.0), dict(maxiter=0), dict(refresh=float("nan")), dict(maxiter=2.5)):
+        with pytest.raises(ValueError, match="Tolerances"):
+            integrators.Tolerances(**bad)

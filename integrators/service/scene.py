@@ -597,6 +597,12 @@ def _check_points(scene, system):
             k = int(np.flatnonzero(bad)[0])
             raise SceneError(f"{what}: point {k} = {q[k].tolist()} is not finite or outside the domain of {system.name}")
         with np.errstate(all="ignore"):
+            for key, values in (("H", system.H(q)), ("theta", system.theta(q)), ("H's gradient", system.dH(q))):
+                bad = ~np.isfinite(values).reshape(q.shape[0], -1).all(axis=1)
+                if bad.any():
+                    k = int(np.flatnonzero(bad)[0])
+                    raise SceneError(f"{what}: system.{key} is not finite at point {k} = {q[k].tolist()} "
+                                     f"(outside where the expression is defined?)")
             cond = np.linalg.cond(system.Omega(q))
         bad = ~(cond < 1e12)
         if bad.any():                     # the equations of motion need Ω̄ invertible (eq:euler_lagrange_equations_matrix)
