@@ -336,6 +336,12 @@ def main(argv=None) -> int:
             # so leave at once
             os._exit(EXIT_OUTPUT)
         return EXIT_OUTPUT
+    except BrokenPipeError:             # the reader went away (poincare plot … | head): nothing to say
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_OK
     except (ValueError, OSError) as exc:
         say(f"error: {exc}")
         return EXIT_INPUT

@@ -87,7 +87,7 @@ def _grid(run, inv, form, out):
 def _caption(under, broke):
     parts = (["grey: the set is under-resolved there"] if under else []) + \
         (["red: points of the set broke down, no invariant"] if broke else [])
-    return f"\n({'; '.join(parts)})" if parts else ""
+    return "".join(f"\n({p})" for p in parts)
 
 
 def _diagnostics(run, out):
