@@ -496,3 +496,30 @@ def test_the_readme_and_systems_doc_snippets_define_what_they_use(tmp_path):
 def test_an_expression_not_finite_at_the_sample_points_is_refused():
     with pytest.raises(SceneError, match=r"^loop: system.H is not finite at point 0 = \[0.55, 0.5\]"):
         parse_scene(USER.replace('H = "x^2 + y^2"', 'H = "sqrt(x - 10) + y^2"'))
+
+
+def test_force_never_replaces_what_is_not_a_regular_file(tmp_path):
+    fifo = tmp_path / "pipe.h5"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match="is not a regular file"):
+        driver.run(scene(20), fifo, force=True, progress=False)
+    assert not fifo.is_file() and fifo.exists()
+
+
+def test_force_through_a_symlink_replaces_its_target(tmp_path):
+    target, link = tmp_path / "data" / "a.h5", tmp_path / "a.h5"
+    target.parent.mkdir()
+    driver.run(scene(20), target, progress=False)
+    link.symlink_to(target)
+    driver.run(scene(30), link, force=True, progress=False)
+    assert link.is_symlink()
+    with h5py.File(target) as f:
+        assert int(f.attrs["steps"]) == 30
+
+
+def test_a_step_count_beyond_exact_step_times_is_refused(capsys, tmp_path):
+    with pytest.raises(SceneError, match=r"run.steps must be between 1 and 2\^53"):
+        parse_scene(USER.replace("steps = 20", "steps = 100000000000000000000"))
+    (tmp_path / "osc.toml").write_text(USER)
+    assert cli_main(["run", str(tmp_path / "osc.toml"), "-o", str(tmp_path / "o.h5"), "--steps", str(2**53 + 1)]) == 2
+    assert "--steps must be at most 2^53" in capsys.readouterr().err and not (tmp_path / "o.h5").exists()

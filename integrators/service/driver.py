@@ -87,6 +87,8 @@ def _check_output(path, resume, force):
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         return f"output directory '{parent}' does not exist"
+    if path.exists() and not path.is_file():      # a device, a FIFO: never written, never replaced
+        return f"output '{path}' is not a regular file"
     if path.exists() and not (resume or force):
         return f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
     if resume and not path.exists():
@@ -186,7 +188,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
                 target = path
                 if path.exists():
-                    replacing = _Replacement(path)
+                    replacing = _Replacement(path.resolve())      # (through a symlink: its target)
                     target = replacing.new
                 f = output.create(target, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
             for tab, proj in scene.pairs:

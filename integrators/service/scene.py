@@ -81,6 +81,7 @@ SCENE_DIR = Path(__file__).parent / "scenes"
 
 
 CHECKPOINT_SECONDS = 60.0          # default of output.checkpoint_seconds
+MAX_STEPS = 2**53                  # run.steps and --steps: every step number k, and so t = k·h, exact in double
 
 
 class SceneError(ValueError):
@@ -181,6 +182,8 @@ class Scene:
         """The same scene run for ``steps`` steps (``poincare run --steps``)."""
         if steps < self.output_every:
             raise SceneError(f"--steps {steps} is below run.output_every = {self.output_every}")
+        if steps > MAX_STEPS:
+            raise SceneError(f"--steps must be at most 2^53 = {MAX_STEPS:,}, got {steps}")
         return dataclasses.replace(self, steps=int(steps))
 
     @property
@@ -360,8 +363,9 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     if not math.isfinite(h) or h <= 0:
         raise SceneError(f"run.h must be a finite positive number, got {run['h']!r}")
     steps = run["steps"]
-    if steps <= 0:
-        raise SceneError(f"run.steps must be positive, got {steps}")
+    if not 0 < steps <= MAX_STEPS:
+        raise SceneError(f"run.steps must be between 1 and 2^53 = {MAX_STEPS:,} (step times exact in double), "
+                         f"got {steps}")
     every = run.get("output_every", max(1, steps // 100))
     if every <= 0 or every > steps:
         raise SceneError(f"run.output_every must be between 1 and run.steps = {steps}, got {every}")
