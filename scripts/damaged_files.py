@@ -2,7 +2,7 @@
 --resume` make of each damaged copy: one line and exit 0-3, never a traceback or a crash, and a
 refused or failed resume leaves the file byte for byte as it was.
 
-    python scripts/damaged_files.py [--flips 30] [--seed 1] [--offsets 15062 ...] [--below BYTES]
+    python scripts/damaged_files.py [--flips 30] [--seed 1] [--offsets 15062 39781:5 ...] [--below BYTES]
 
 Prints one line per flip and a summary; exits 1 if any flip broke a rule.  (The test suite runs a
 few flips of the same check: tests/test_edges.py.)"""
@@ -64,7 +64,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flips", type=int, default=30)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--offsets", type=int, nargs="*", default=[])
+    ap.add_argument("--offsets", nargs="*", default=[], help="byte offsets to flip, each OFFSET or OFFSET:BIT")
     ap.add_argument("--below", type=int, default=None, help="flip only bytes before this offset (the metadata)")
     args = ap.parse_args(argv)
     import numpy as np
@@ -75,7 +75,7 @@ def main(argv=None):
         assert code == 0, err
         clean = (work / "lv.h5").read_bytes()
         rng = np.random.default_rng(args.seed)
-        flips = [(o, int(rng.integers(8))) for o in args.offsets]
+        flips = [(int(o.split(":")[0]), int(o.split(":")[1]) if ":" in o else int(rng.integers(8))) for o in args.offsets]
         flips += [(int(o), int(b)) for o, b in zip(rng.integers(min(len(clean), args.below or len(clean)), size=args.flips),
                                                    rng.integers(8, size=args.flips))]
         bad = 0

@@ -672,6 +672,7 @@ def read_run(path) -> Run:
                        scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
     except (DamagedFile, BusyFile, FileNotFoundError):
         raise
-    except (OSError, KeyError, ValueError, RuntimeError, TypeError, MemoryError) as exc:
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError, MemoryError, AttributeError) as exc:
+        # (damaged metadata: h5py may hand back None for a group whose header it cannot read)
         raise DamagedFile(f"cannot read '{path}': damaged or not a poincare run file "
                           f"({type(exc).__name__}: {plain_error(exc)})") from None
