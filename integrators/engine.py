@@ -108,7 +108,16 @@ def _body(exprs, targets, qsyms, params, indent):
 
 def generate_source(system) -> str:
     """The Python source of a system's compiled point functions: ``evaluate_real``,
-    ``evaluate_complex`` (the same body, for the audit's complex-step derivatives) and ``inside``."""
+    ``evaluate_complex`` (the same body, for the audit's complex-step derivatives) and ``inside``.
+    Made once per System object (a scene's validation and the engine share it)."""
+    cached = getattr(system, "_generated_source", None)
+    if cached is None:
+        cached = _generate_source(system)
+        system._generated_source = cached
+    return cached
+
+
+def _generate_source(system) -> str:
     d = system.d
     q, params = system.q, list(system.params)
     th = [(f"_th[{i}]", system.theta_expr[i]) for i in range(d)]

@@ -375,22 +375,6 @@ def open_for_resume(path):
     return f
 
 
-def verify(f, path):
-    """Read every dataset once so that a failed checksum stops a resume before anything is written."""
-    bad = []
-
-    def visit(name, obj):
-        if isinstance(obj, h5py.Dataset) and not bad:
-            try:
-                obj[...]
-            except OSError as exc:
-                bad.append((name, plain_error(exc)))
-    f.visititems(visit)
-    if bad:
-        raise DamagedFile(f"'{path}' is damaged: cannot read {bad[0][0]} ({bad[0][1]}); it cannot be resumed "
-                          "(start again with --force)")
-
-
 def pair_summary(g, n_outputs, threshold):
     """(status, breakdowns, {'I1 form': max error over the resolved outputs}, unresolved) of one pair
     group, unresolved = {set: (first under-resolved t, under-resolved outputs, outputs)}; reading a

@@ -518,7 +518,7 @@ def memory_per_point(d, s) -> tuple:
     state (:class:`integrators.engine.State`), Newton factors of a pair with s stages (assuming the
     largest system a projection solves, (s + 2)·d unknowns) and its part of the invariants'
     transforms (about 20 arrays of d doubles).  For GLRK2 on a 4-dimensional system this gives
-    3.1 KiB; measured 1.8-2.3 KiB (docs/benchmarks.md)."""
+    3.0 KiB; measured 1.8-2.3 KiB (docs/benchmarks.md)."""
     from ..engine import State
     nz = (s + 2) * d
     state = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, d, s).values())
