@@ -1,35 +1,42 @@
-"""The compiled step engine's kernel: one (projected) VPRK step per point, in numba.
+"""The compiled step engine's kernel: (projected) VPRK steps of W points at once, in numba.
 
-Nothing here knows a system, a tableau or a projection by name.  The system enters as two
-compiled point functions (generated from its symbolic ϑ and H by :mod:`integrators.engine`):
+Nothing here knows a system, a tableau or a projection by name.  The system enters as compiled
+point functions generated from its symbolic ϑ and H by :mod:`integrators.engine`:
 
     ev(q, k, need, th, T, TT, dH, HH)   ϑ, ϑ_q [k, i], ∇H and, when ``need``, ϑ_qq [k, i, j], ∇²H at q
-    inside(q, k) -> bool                 q is finite and inside the system's domain
+    inside(q, k) -> bool                 q is finite and inside the system's domain (one point)
 
-with ``k`` the parameter values and every matrix flattened row-major.  The tableau is one flat
-array ``[a, a_lo, abar, abar_lo, b, b_lo, d, E]`` (double + correction coefficients, the Lobatto
-constraint vector d, zero when unused, and the stage-guess extrapolation E), and the projection a
-tuple of codes ``(pre, pre_at, post, post_at, sigma, lobatto)`` made by
+with ``k`` the parameter values and every matrix flattened row-major; the W-lane ``ev`` takes
+lane-interleaved arrays.  The tableau is one flat array made and read only here
+(:func:`flat_tableau`, :func:`_coefficients`), the projection a :class:`Plan` made by
 :class:`integrators.projections.Projection` from the paper's table.  So one compilation serves
-every system, every tableau and every projection; only the dtype (float64 for runs, complex128
-for the audit's complex-step derivatives) makes a second one.
+every system, tableau and projection; the dtype (float64 for runs, complex128 for the audit's
+complex-step derivatives), the dimension d and the lane count W make the others.
+
+**Lanes.**  The code is written once against :mod:`integrators.simd`: given W-lane pointers it
+advances W points in lockstep, every arithmetic operation a packed instruction over the lanes;
+given plain pointers (W = 1) it is the scalar path, one point at a time (the single-trajectory
+path and the complex-step audit).  Every decision stays per point: Newton's convergence, the
+Jacobian refresh, the retry and the breakdown are per-lane masks; a lane that has converged is held
+at its solution while the others iterate; a lane that asks for fresh factors gets them (all lanes
+are factorised, only the lanes that asked keep theirs), and pivoting is per lane.  So a point's
+bits are those of the scalar path whatever W, whichever points share its lanes, and for any thread
+or rank count (tests/test_lanes.py).  No fastmath, no fused multiply–add.
 
 The unknowns of a step are z = [Y_1 … Y_s, Λ (coupled projections), μ (Lobatto)] with
-Y_i = h V_i the stage displacements and Λ = hλ (see integrators/projections.py for the equations,
-eq:vprk_1–eq:vprk_3, eq:vprk_lobatto and the projections' eq:…_pre / eq:…_post).  Newton uses
-the exact Jacobian, factorised by a small dense LU with partial pivoting and kept across
-iterations and steps while it contracts.  Every decision is per point, so a point's bits never
-depend on its batch, the thread count or the MPI rank count.  No fastmath.
-
-Inside a step the kernel works on raw pointers into one scratch buffer per thread (``_at``): numba
-reference-counts every array view it makes, and those atomic counts cost more than the arithmetic
-of a small step; the small helpers are inlined at numba's level (profile in docs/benchmarks.md).
+Y_i = h V_i the stage displacements and Λ = hλ (see integrators/projections.py).  Newton uses the
+exact Jacobian, factorised by a small dense LU with partial pivoting and kept across iterations and
+steps while it contracts.
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
-from numba import njit, prange, types
-from numba.extending import intrinsic
+from numba import njit, prange
+
+from .simd import _at, anyl, at, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, raw, re, sel, \
+    st, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
 
@@ -46,104 +53,157 @@ REFRESH = 0.01          # a fresh Jacobian when an iteration contracted by less 
 #                         iterations per step and +9 % point-steps/s, GLRK2-symmetric 7.5 -> 6.5 and +3 %, on
 #                         guiding_centre_symmetric at h = 10; docs/benchmarks.md)
 
-# where ϑ and its derivatives were last evaluated (point-buffer slots; codes of the projections)
+LANES = 8               # W of the vector path: 8 doubles fill an AVX-512 register, two AVX2 ones
+
+# -- the projection as the kernel reads it ------------------------------------------------------
+
+# where ϑ and its derivatives are evaluated: the point slots of the scratch (and a projection's `at`)
 START, MIDPOINT, END = 0, 1, 2
+# the perturbation before Ψ_h: none; Λ of this step, solved with the stages (symmetric, midpoint);
+# the last step's Λ (symplectic)
+PRE_NONE, PRE_UNKNOWN, PRE_PREVIOUS = 0, 1, 2
 
-# offsets into the scratch buffer (see _layout) and slots of its vectors
-(_Q, _TH, _T, _TT, _DH, _HH, _G, _K, _PTH, _PT, _PTT, _PDH, _PHH, _V, _Z, _ZEV, _R, _S, _PL, _PZ, _PZEV, _PR,
- _GUESS, _ZERO, _NBUF) = range(25)
-(_QBAR, _PBAR, _Q0, _PB, _SY, _SG, _Q1, _P1, _M, _TL, _QH, _PH, _VF, _INC, _QN, _QCN, _PN, _PCN, _LN,
- _SYS) = range(20)
-_NVEC = 20
+Plan = namedtuple("Plan", "pre pre_at post post_at sigma lobatto")
+Plan.__doc__ = """A projection as the kernel reads it (made by Projection.plan): ``pre`` one of PRE_*,
+``pre_at``/``post_at`` where ϑ_q of the pre/post terms is taken (START, MIDPOINT, END), ``post``
+whether the step ends on the constraint, ``sigma`` the post term's weight, ``lobatto`` whether the
+tableau has the Lobatto constraint μ (eq:vprk_lobatto)."""
+
+# -- the tableau's flat layout, made and read here only ----------------------------------------
+
+Coefficients = namedtuple("Coefficients", "a a_lo abar abar_lo b b_lo d E")
 
 
-@intrinsic
-def _at(typingctx, base, off):
-    """Pointer to element ``off`` (flat, C order) of an array, or ``off`` elements past a pointer."""
-    if isinstance(base, types.Array):
-        def codegen(context, builder, sig, args):
-            ary = context.make_array(sig.args[0])(context, builder, args[0])
-            return builder.gep(ary.data, [args[1]])
-        return types.CPointer(base.dtype)(base, off), codegen
-    if isinstance(base, types.CPointer):
-        def codegen(context, builder, sig, args):
-            return builder.gep(args[0], [args[1]])
-        return base(base, off), codegen
+def flat_tableau(tableau, E):
+    """[a, a_lo, ā, ā_lo, b, b_lo, d, E] as one float64 array (double + correction coefficients, the
+    Lobatto constraint vector d, zero when unused, and the stage-guess extrapolation E)."""
+    s = tableau.s
+    parts = (tableau.a, tableau.a_lo, tableau.abar, tableau.abar_lo, tableau.b, tableau.b_lo,
+             tableau.d if tableau.d is not None else np.zeros(s), E)
+    return np.concatenate([np.asarray(x, dtype=np.float64).ravel() for x in parts])
+
+
+@njit(inline='always', **_OPTS)
+def _coefficients(tb, s):
+    ss = s * s
+    return Coefficients(_at(tb, 0), _at(tb, ss), _at(tb, 2 * ss), _at(tb, 3 * ss), _at(tb, 4 * ss),
+                        _at(tb, 4 * ss + s), _at(tb, 4 * ss + 2 * s), _at(tb, 4 * ss + 3 * s))
+
+
+# -- the scratch: named offsets into one buffer per group of W points ---------------------------
+
+Scratch = namedtuple("Scratch", [
+    # stage values: Q_i, ϑ(Q_i), ϑ_q, ϑ_qq, ∇H, ∇²H, G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i), K_i = ∂G_i/∂Q_i
+    "Q", "th", "T", "TT", "dH", "HH", "G", "K",
+    # the point slots START, MIDPOINT, END: ϑ, ϑ_q, ϑ_qq, ∇H, ∇²H
+    "pth", "pT", "pTT", "pdH", "pHH",
+    # d-vectors
+    "qbar", "pbar", "q0", "pb", "sY", "sG", "q1", "p1", "mid", "tl", "qh", "ph", "vf", "inc", "qn", "qcn", "pn",
+    "pcn", "ln", "sYs", "qr",
+    # Newton: unknowns, evaluated iterate, residual, fresh Jacobian, projection's Newton, guesses
+    "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess", "zero",
+    # the points' own state while the group is advanced
+    "q", "p", "lam", "qc", "pc", "Y", "mu", "lu",
+    "size"])
+Scratch.__doc__ = "Offsets (in logical elements; × W in memory) of the scratch buffers of a group."
+
+Flags = namedtuple("Flags", [
+    "scale", "pscale",            # every unknown relative to its coordinate's size (nz, d)
+    "done", "ok", "stale", "prev", "its", "norm", "nan", "finite",   # Newton's per-lane bookkeeping
+    "have", "hist", "live", "active", "okstep", "tbrk", "itn", "stp",   # the points' step flags
+    "size"])
+Flags.__doc__ = "Offsets of the per-lane real (never complex) bookkeeping."
+
+IntScratch = namedtuple("IntScratch", "piv pivt ipiv size")
 
 
 @njit(**_OPTS)
-def _layout(s, d, nz):
-    """Offsets of the scratch buffers in one flat array, and its length."""
-    dd = d * d
-    sizes = (s * d, s * d, s * dd, s * dd * d, s * d, s * dd, s * d, s * dd,
-             3 * d, 3 * dd, 3 * dd * d, 3 * d, 3 * dd,
-             _NVEC * d, nz, nz, nz, 2 * dd, dd, d, d, d, s * d, d)
-    off = [0] * (len(sizes) + 1)
+def layout(s, d, nz):
+    """The three scratch layouts of a group (:class:`Scratch`, :class:`Flags`, :class:`IntScratch`):
+    each buffer's offset, in the order of the fields, and the total size last."""
+    dd, sd = d * d, s * d
+    sizes = (sd, sd, s * dd, s * dd * d, sd, s * dd, sd, s * dd,      # Q th T TT dH HH G K
+             3 * d, 3 * dd, 3 * dd * d, 3 * d, 3 * dd,                 # pth pT pTT pdH pHH
+             d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d,   # qbar … qr
+             nz, nz, nz, nz * nz, 2 * dd, dd, d, d, d, dd, sd, d,       # z zev r Jt S PL pz pzev pr pJ guess zero
+             d, d, d, d, d, sd, d, nz * nz)                            # q p lam qc pc Y mu lu
+    o = [0] * (len(sizes) + 1)
     for i in range(len(sizes)):
-        off[i + 1] = off[i] + sizes[i]
-    return (off[0], off[1], off[2], off[3], off[4], off[5], off[6], off[7], off[8], off[9], off[10], off[11],
-            off[12], off[13], off[14], off[15], off[16], off[17], off[18], off[19], off[20], off[21], off[22],
-            off[23], off[24])
+        o[i + 1] = o[i] + sizes[i]
+    S = Scratch(o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8], o[9], o[10], o[11], o[12], o[13], o[14],
+                o[15], o[16], o[17], o[18], o[19], o[20], o[21], o[22], o[23], o[24], o[25], o[26], o[27], o[28],
+                o[29], o[30], o[31], o[32], o[33], o[34], o[35], o[36], o[37], o[38], o[39], o[40], o[41], o[42],
+                o[43], o[44], o[45], o[46], o[47], o[48], o[49], o[50], o[51], o[52], o[53], o[54])
+    f = nz + d                      # after scale (nz) and pscale (d), one number a lane each
+    F = Flags(0, nz, f, f + 1, f + 2, f + 3, f + 4, f + 5, f + 6, f + 7, f + 8, f + 9, f + 10, f + 11, f + 12,
+              f + 13, f + 14, f + 15, f + 16)
+    return S, F, IntScratch(0, nz, 2 * nz, 2 * nz + d)
 
 
-# -- small dense linear algebra ---------------------------------------------------------------
+# -- small dense linear algebra, per lane ---------------------------------------------------------
 
 @njit(inline='always', **_OPTS)
 def lu_factor(A, piv, n):
-    """In-place LU of the n×n row-major A with partial pivoting (pivot chosen on the real part, so
-    the complex-step specialisation pivots exactly as the real one).  A zero pivot is left in
-    place: the solve then gives inf/NaN, which the Newton iteration reads as a failure."""
+    """In-place LU of the n×n row-major A with partial pivoting, each lane its own pivots (chosen on
+    the real part, so the complex-step specialisation pivots exactly as the real one).  A zero pivot
+    is left in place: the solve then gives inf/NaN, which the Newton iteration reads as a failure."""
+    W = nlanes(A)
     for col in range(n):
-        p = col
-        best = abs(A[col * n + col].real)
+        for l in range(W):
+            p = col
+            best = abs(re(lget(A, col * n + col, l)))
+            for i in range(col + 1, n):
+                v = abs(re(lget(A, i * n + col, l)))
+                if v > best:
+                    best, p = v, i
+            lset(piv, col, l, p)
+            if p != col:
+                for j in range(n):
+                    tmp = lget(A, col * n + j, l)
+                    lset(A, col * n + j, l, lget(A, p * n + j, l))
+                    lset(A, p * n + j, l, tmp)
+        inv = 1.0 / ld(A, col * n + col)
         for i in range(col + 1, n):
-            v = abs(A[i * n + col].real)
-            if v > best:
-                best, p = v, i
-        piv[col] = p
-        if p != col:
-            for j in range(n):
-                tmp = A[col * n + j]
-                A[col * n + j] = A[p * n + j]
-                A[p * n + j] = tmp
-        inv = 1.0 / A[col * n + col]
-        for i in range(col + 1, n):
-            f = A[i * n + col] * inv
-            A[i * n + col] = f
-            if f != 0.0:
+            f = ld(A, i * n + col) * inv
+            st(A, i * n + col, f)
+            nonzero = f != 0.0
+            if anyl(nonzero):
                 for j in range(col + 1, n):
-                    A[i * n + j] = A[i * n + j] - f * A[col * n + j]
+                    x = ld(A, i * n + j)
+                    st(A, i * n + j, sel(nonzero, x - f * ld(A, col * n + j), x))
 
 
 @njit(inline='always', **_OPTS)
 def lu_solve(A, piv, x, n):
     """Solve A x = b in place (x holds b on entry) with the factors of :func:`lu_factor`."""
+    W = nlanes(A)
     for i in range(n):
-        p = piv[i]
-        if p != i:
-            tmp = x[i]
-            x[i] = x[p]
-            x[p] = tmp
+        for l in range(W):
+            p = lget(piv, i, l)
+            if p != i:
+                tmp = lget(x, i, l)
+                lset(x, i, l, lget(x, p, l))
+                lset(x, p, l, tmp)
     for i in range(n):
-        acc = x[i]
+        acc = ld(x, i)
         for j in range(i):
-            acc = acc - A[i * n + j] * x[j]
-        x[i] = acc
+            acc = acc - ld(A, i * n + j) * ld(x, j)
+        st(x, i, acc)
     for i in range(n - 1, -1, -1):
-        acc = x[i]
+        acc = ld(x, i)
         for j in range(i + 1, n):
-            acc = acc - A[i * n + j] * x[j]
-        x[i] = acc / A[i * n + i]
+            acc = acc - ld(A, i * n + j) * ld(x, j)
+        st(x, i, acc / ld(A, i * n + i))
 
 
 @njit(inline='always', **_OPTS)
 def _tapply(T, v, out, d):
     """out_m = Σ_l T[l, m] v_l  (ϑ_qᵀ v)."""
     for m in range(d):
-        acc = T[m] * v[0]
+        acc = ld(T, m) * ld(v, 0)
         for l in range(1, d):
-            acc = acc + T[l * d + m] * v[l]
-        out[m] = acc
+            acc = acc + ld(T, l * d + m) * ld(v, l)
+        st(out, m, acc)
 
 
 @njit(inline='always', **_OPTS)
@@ -151,515 +211,659 @@ def _contract(TT, v, out, d):
     """out[m, n] = Σ_l TT[l, m, n] v_l  (∂(ϑ_qᵀ v)/∂q)."""
     dd = d * d
     for mn in range(dd):
-        acc = TT[mn] * v[0]
+        acc = ld(TT, mn) * ld(v, 0)
         for l in range(1, d):
-            acc = acc + TT[l * dd + mn] * v[l]
-        out[mn] = acc
+            acc = acc + ld(TT, l * dd + mn) * ld(v, l)
+        st(out, mn, acc)
 
 
 @njit(inline='always', **_OPTS)
-def _eval(ev, k, x, need, w, L, slot, d):
+def _eval(ev, k, x, need, w, S, slot, d):
     """ϑ and its derivatives at x into point slot ``slot`` (START, MIDPOINT or END)."""
     dd = d * d
-    ev(x, k, need, _at(w, L[_PTH] + slot * d), _at(w, L[_PT] + slot * dd), _at(w, L[_PTT] + slot * dd * d),
-       _at(w, L[_PDH] + slot * d), _at(w, L[_PHH] + slot * dd))
+    ev(raw(x), k, need, raw(at(w, S.pth + slot * d)), raw(at(w, S.pT + slot * dd)),
+       raw(at(w, S.pTT + slot * dd * d)), raw(at(w, S.pdH + slot * d)), raw(at(w, S.pHH + slot * dd)))
 
 
 # -- the step's equations ---------------------------------------------------------------------
 
 @njit(inline='always', **_OPTS)
-def _main(z, jac, r, J, ev, k, h, tb, proj, d, s, w, L):
-    """Residual (and Jacobian into J) of the stage equations, with the coupled projection's Λ.
-
-    R_i = ϑ(Q_i) − p̃ − Σ_j ā_ij G_j (+ μ d_i/b_i),  Q_i = q̃ + Σ_j a_ij Y_j,  G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i)
-    (eq:vprk_2, eq:vprk_lobatto); with a coupled projection q̃ = q̄ + Λ, p̃ = p̄ + ϑ_q(x_pre)ᵀΛ
-    (eq:symmetric_projection_pre, eq:symplectic_midpoint_projection_pre) and the constraint row
-    R_Λ = p_{n+1} − ϑ(q_{n+1}) with q_{n+1} = q̃ + Σ b_i Y_i + σΛ and
-    p_{n+1} = p̃ + Σ b_i G_i + σ ϑ_q(x_post)ᵀΛ (the matching _post labels).
-    """
-    pre, pre_at, post, post_at, sig, lob = proj
-    ss = s * s
-    a, alo, ab, ablo = _at(tb, 0), _at(tb, ss), _at(tb, 2 * ss), _at(tb, 3 * ss)
-    b, blo, dv = _at(tb, 4 * ss), _at(tb, 4 * ss + s), _at(tb, 4 * ss + 2 * s)
+def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
+    """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
+    eq:vprk_3); with ``jac`` also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i G_i (sY, sG), double +
+    correction weights."""
     dd = d * d
     ddd = dd * d
-    Q, th, T, TT = _at(w, L[_Q]), _at(w, L[_TH]), _at(w, L[_T]), _at(w, L[_TT])
-    dH, HH, G, K = _at(w, L[_DH]), _at(w, L[_HH]), _at(w, L[_G]), _at(w, L[_K])
-    pth, pT, pTT = _at(w, L[_PTH]), _at(w, L[_PT]), _at(w, L[_PTT])
-    V = L[_V]
-    qbar, pbar, q0, pb = _at(w, V + _QBAR * d), _at(w, V + _PBAR * d), _at(w, V + _Q0 * d), _at(w, V + _PB * d)
-    sY, sG, q1, p1 = _at(w, V + _SY * d), _at(w, V + _SG * d), _at(w, V + _Q1 * d), _at(w, V + _P1 * d)
-    M, tl = _at(w, V + _M * d), _at(w, V + _TL * d)
-    sd = s * d
-    coupled = pre == 1
-    iL = sd
-    iM = sd + d if coupled else sd
-    for m in range(d):
-        q0[m] = qbar[m] + z[iL + m] if coupled else qbar[m]
+    Q, th, T, TT, dH, HH = at(w, S.Q), at(w, S.th), at(w, S.T), at(w, S.TT), at(w, S.dH), at(w, S.HH)
+    G, K, sY, sG = at(w, S.G), at(w, S.K), at(w, S.sY), at(w, S.sG)
     for i in range(s):
         for m in range(d):
-            acc = a[i * s] * z[m]
+            acc = c.a[i * s] * ld(z, m)
             for j in range(1, s):
-                acc = acc + a[i * s + j] * z[j * d + m]
-            cor = alo[i * s] * z[m]
+                acc = acc + c.a[i * s + j] * ld(z, j * d + m)
+            cor = c.a_lo[i * s] * ld(z, m)
             for j in range(1, s):
-                cor = cor + alo[i * s + j] * z[j * d + m]
-            Q[i * d + m] = q0[m] + (acc + cor)
-        ev(_at(Q, i * d), k, jac, _at(th, i * d), _at(T, i * dd), _at(TT, i * ddd), _at(dH, i * d), _at(HH, i * dd))
-        Gi = _at(G, i * d)
-        _tapply(_at(T, i * dd), _at(z, i * d), Gi, d)
+                cor = cor + c.a_lo[i * s + j] * ld(z, j * d + m)
+            st(Q, i * d + m, ld(q0, m) + (acc + cor))
+        ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),
+           raw(at(dH, i * d)), raw(at(HH, i * dd)))
+        Gi = at(G, i * d)
+        _tapply(at(T, i * dd), at(z, i * d), Gi, d)
         for m in range(d):
-            Gi[m] = Gi[m] - h * dH[i * d + m]
+            st(Gi, m, ld(Gi, m) - h * ld(dH, i * d + m))
         if jac:
-            Ki = _at(K, i * dd)
-            _contract(_at(TT, i * ddd), _at(z, i * d), Ki, d)
+            Ki = at(K, i * dd)
+            _contract(at(TT, i * ddd), at(z, i * d), Ki, d)
             for mn in range(dd):
-                Ki[mn] = Ki[mn] - h * HH[i * dd + mn]
-    for m in range(d):                     # Σ b_i Y_i and Σ b_i G_i, double + correction weights
-        acc = b[0] * z[m]
-        cor = blo[0] * z[m]
-        accg = b[0] * G[m]
-        corg = blo[0] * G[m]
+                st(Ki, mn, ld(Ki, mn) - h * ld(HH, i * dd + mn))
+    for m in range(d):
+        acc = c.b[0] * ld(z, m)
+        cor = c.b_lo[0] * ld(z, m)
+        accg = c.b[0] * ld(G, m)
+        corg = c.b_lo[0] * ld(G, m)
         for i in range(1, s):
-            acc = acc + b[i] * z[i * d + m]
-            cor = cor + blo[i] * z[i * d + m]
-            accg = accg + b[i] * G[i * d + m]
-            corg = corg + blo[i] * G[i * d + m]
-        sY[m] = acc + cor
-        sG[m] = accg + corg
-    Lz = _at(z, iL)
-    px = START
-    if coupled:
-        if pre_at == MIDPOINT:             # ϑ_q at the unprojected midpoint q̄_{n+1/2}
-            for m in range(d):
-                M[m] = q0[m] + 0.5 * sY[m]
-            _eval(ev, k, M, jac, w, L, MIDPOINT, d)
-            px = MIDPOINT
-        _tapply(_at(pT, px * dd), Lz, pb, d)
-        for m in range(d):
-            pb[m] = pbar[m] + pb[m]
-    else:
-        for m in range(d):
-            pb[m] = pbar[m]
-    for i in range(s):
-        for m in range(d):
-            acc = ab[i * s] * G[m]
-            for j in range(1, s):
-                acc = acc + ab[i * s + j] * G[j * d + m]
-            cor = ablo[i * s] * G[m]
-            for j in range(1, s):
-                cor = cor + ablo[i * s + j] * G[j * d + m]
-            rr = th[i * d + m] - pb[m] - (acc + cor)
-            if lob:
-                rr = rr + z[iM + m] * (dv[i] / b[i])
-            r[i * d + m] = rr
-    if coupled:
-        for m in range(d):
-            q1[m] = q0[m] + sY[m] + sig * Lz[m]
-        _eval(ev, k, q1, jac, w, L, END, d)
-        pp = END if post_at == END else px
-        _tapply(_at(pT, pp * dd), Lz, tl, d)
-        for m in range(d):
-            p1[m] = pb[m] + sG[m] + sig * tl[m]
-            r[iL + m] = p1[m] - pth[END * d + m]
-    if lob:
-        for m in range(d):
-            acc = dv[0] * z[m]
-            for i in range(1, s):
-                acc = acc + dv[i] * z[i * d + m]
-            r[iM + m] = acc
-    if not jac:
-        return
-    # -- the exact Jacobian ------------------------------------------------------------------
-    nz = sd + (d if coupled else 0) + (d if lob else 0)
-    for i in range(nz * nz):
-        J[i] = 0.0
-    Sx, S1 = _at(w, L[_S]), _at(w, L[_S] + dd)
-    if coupled and pre_at == MIDPOINT:
-        _contract(_at(pTT, MIDPOINT * ddd), Lz, Sx, d)        # ∂(ϑ_q(M)ᵀΛ)/∂M
-    if coupled and post_at == END:
-        _contract(_at(pTT, END * ddd), Lz, S1, d)             # ∂(ϑ_q(q1)ᵀΛ)/∂q1
-    for i in range(s):
-        for j in range(s):
-            aij, abij = a[i * s + j], ab[i * s + j]
-            for m in range(d):
-                for n in range(d):
-                    B = aij * T[i * dd + m * d + n] - abij * T[j * dd + n * d + m]
-                    for l in range(s):
-                        c = ab[i * s + l] * a[l * s + j]
-                        if c != 0.0:
-                            B = B - c * K[l * dd + m * d + n]
-                    if coupled and pre_at == MIDPOINT:
-                        B = B - (0.5 * b[j]) * Sx[m * d + n]
-                    J[(i * d + m) * nz + j * d + n] = B
-    if coupled:
-        Tx = _at(pT, px * dd)
-        T1 = _at(pT, END * dd)
-        Tp = T1 if post_at == END else Tx
-        spost = S1 if post_at == END else Sx
-        upost = (1.0 + sig) if post_at == END else 1.0      # ∂x_post/∂Λ
-        cpost = 1.0 if post_at == END else 0.5              # ∂x_post/∂Y_j = cpost b_j
-        for m in range(d):
-            for n in range(d):
-                dpb = Tx[n * d + m]                         # ∂p̃/∂Λ = ϑ_q(x_pre)ᵀ (+ S_x at the midpoint)
-                if pre_at == MIDPOINT:
-                    dpb = dpb + Sx[m * d + n]
-                for i in range(s):
-                    B = T[i * dd + m * d + n]
-                    for l in range(s):
-                        if ab[i * s + l] != 0.0:
-                            B = B - ab[i * s + l] * K[l * dd + m * d + n]
-                    J[(i * d + m) * nz + iL + n] = B - dpb
-                KS = b[0] * K[m * d + n]
-                for l in range(1, s):
-                    KS = KS + b[l] * K[l * dd + m * d + n]
-                J[(iL + m) * nz + iL + n] = (dpb + sig * Tp[n * d + m] + (sig * upost) * spost[m * d + n]) + KS \
-                    - (1.0 + sig) * T1[m * d + n]
-                for j in range(s):
-                    KB = b[0] * a[j] * K[m * d + n]
-                    for l in range(1, s):
-                        KB = KB + b[l] * a[l * s + j] * K[l * dd + m * d + n]
-                    ey = sig * cpost * spost[m * d + n]
-                    if pre_at == MIDPOINT:
-                        ey = ey + 0.5 * Sx[m * d + n]
-                    J[(iL + m) * nz + j * d + n] = KB + b[j] * T[j * dd + n * d + m] + b[j] * ey - b[j] * T1[m * d + n]
-    if lob:
-        for i in range(s):
-            for m in range(d):
-                J[(i * d + m) * nz + iM + m] = dv[i] / b[i]
-                J[(iM + m) * nz + i * d + m] = dv[i]
+            acc = acc + c.b[i] * ld(z, i * d + m)
+            cor = cor + c.b_lo[i] * ld(z, i * d + m)
+            accg = accg + c.b[i] * ld(G, i * d + m)
+            corg = corg + c.b_lo[i] * ld(G, i * d + m)
+        st(sY, m, acc + cor)
+        st(sG, m, accg + corg)
 
 
 @njit(inline='always', **_OPTS)
-def _post(z, jac, r, J, ev, k, sig, d, w, L):
+def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
+    """The residual of the step's equations; returns the slot of ϑ_q in the pre term.
+
+    R_i = ϑ(Q_i) − p̃ − Σ_j ā_ij G_j (+ μ d_i/b_i)  (eq:vprk_2, eq:vprk_lobatto).  With a coupled
+    projection q̃ = q̄ + Λ, p̃ = p̄ + ϑ_q(x_pre)ᵀΛ (eq:symmetric_projection_pre,
+    eq:symplectic_midpoint_projection_pre) and the constraint row R_Λ = p_{n+1} − ϑ(q_{n+1}) with
+    q_{n+1} = q̃ + Σ b_i Y_i + σΛ, p_{n+1} = p̃ + Σ b_i G_i + σ ϑ_q(x_post)ᵀΛ (the matching _post).
+    """
+    dd = d * d
+    sd = s * d
+    coupled = plan.pre == PRE_UNKNOWN
+    iL = sd
+    iM = sd + d if coupled else sd
+    qbar, pbar, q0, pb = at(w, S.qbar), at(w, S.pbar), at(w, S.q0), at(w, S.pb)
+    sY, sG, q1, p1, mid, tl = at(w, S.sY), at(w, S.sG), at(w, S.q1), at(w, S.p1), at(w, S.mid), at(w, S.tl)
+    th, G, pth, pT = at(w, S.th), at(w, S.G), at(w, S.pth), at(w, S.pT)
+    Lz = at(z, iL)
+    for m in range(d):
+        st(q0, m, ld(qbar, m) + ld(Lz, m) if coupled else ld(qbar, m))
+    _stages(z, jac, ev, k, h, c, q0, s, d, w, S)
+    px = START
+    if coupled:
+        if plan.pre_at == MIDPOINT:        # ϑ_q at the unprojected midpoint q̄_{n+1/2}
+            for m in range(d):
+                st(mid, m, ld(q0, m) + 0.5 * ld(sY, m))
+            _eval(ev, k, mid, jac, w, S, MIDPOINT, d)
+            px = MIDPOINT
+        _tapply(at(pT, px * dd), Lz, pb, d)
+        for m in range(d):
+            st(pb, m, ld(pbar, m) + ld(pb, m))
+    else:
+        for m in range(d):
+            st(pb, m, ld(pbar, m))
+    for i in range(s):
+        for m in range(d):
+            acc = c.abar[i * s] * ld(G, m)
+            for j in range(1, s):
+                acc = acc + c.abar[i * s + j] * ld(G, j * d + m)
+            cor = c.abar_lo[i * s] * ld(G, m)
+            for j in range(1, s):
+                cor = cor + c.abar_lo[i * s + j] * ld(G, j * d + m)
+            rr = ld(th, i * d + m) - ld(pb, m) - (acc + cor)
+            if plan.lobatto:
+                rr = rr + ld(z, iM + m) * (c.d[i] / c.b[i])
+            st(r, i * d + m, rr)
+    if coupled:
+        for m in range(d):
+            st(q1, m, ld(q0, m) + ld(sY, m) + plan.sigma * ld(Lz, m))
+        _eval(ev, k, q1, jac, w, S, END, d)
+        pp = END if plan.post_at == END else px
+        _tapply(at(pT, pp * dd), Lz, tl, d)
+        for m in range(d):
+            st(p1, m, ld(pb, m) + ld(sG, m) + plan.sigma * ld(tl, m))
+            st(r, iL + m, ld(p1, m) - ld(pth, END * d + m))
+    if plan.lobatto:
+        for m in range(d):
+            acc = c.d[0] * ld(z, m)
+            for i in range(1, s):
+                acc = acc + c.d[i] * ld(z, i * d + m)
+            st(r, iM + m, acc)
+    return px
+
+
+@njit(inline='always', **_OPTS)
+def _stage_jacobian(J, nz, c, plan, d, s, w, S):
+    """∂R_i/∂Y_j: a_ij ϑ_q(Q_i) − ā_ij ϑ_q(Q_j)ᵀ − Σ_l ā_il a_lj K_l (− b_j S_x/2 at the midpoint)."""
+    dd = d * d
+    T, K, Sx = at(w, S.T), at(w, S.K), at(w, S.S)
+    mid = plan.pre == PRE_UNKNOWN and plan.pre_at == MIDPOINT
+    for i in range(s):
+        for j in range(s):
+            aij, abij = c.a[i * s + j], c.abar[i * s + j]
+            for m in range(d):
+                for n in range(d):
+                    B = aij * ld(T, i * dd + m * d + n) - abij * ld(T, j * dd + n * d + m)
+                    for l in range(s):
+                        cc = c.abar[i * s + l] * c.a[l * s + j]
+                        if cc != 0.0:
+                            B = B - cc * ld(K, l * dd + m * d + n)
+                    if mid:
+                        B = B - (0.5 * c.b[j]) * ld(Sx, m * d + n)
+                    st(J, (i * d + m) * nz + j * d + n, B)
+
+
+@njit(inline='always', **_OPTS)
+def _projection_jacobian(J, nz, px, c, plan, d, s, w, S):
+    """The coupled projection's rows and columns: ∂R_i/∂Λ, ∂R_Λ/∂Λ and ∂R_Λ/∂Y_j (the derivatives of
+    the pre and post terms of eq:symmetric_projection_pre/_post and the midpoint's)."""
+    dd = d * d
+    sd = s * d
+    iL = sd
+    T, K, pT = at(w, S.T), at(w, S.K), at(w, S.pT)
+    Sx, S1 = at(w, S.S), at(w, S.S + dd)
+    sig = plan.sigma
+    Tx = at(pT, px * dd)
+    T1 = at(pT, END * dd)
+    Tp = T1 if plan.post_at == END else Tx
+    spost = S1 if plan.post_at == END else Sx
+    upost = (1.0 + sig) if plan.post_at == END else 1.0      # ∂x_post/∂Λ
+    cpost = 1.0 if plan.post_at == END else 0.5              # ∂x_post/∂Y_j = cpost b_j
+    mid = plan.pre_at == MIDPOINT
+    for m in range(d):
+        for n in range(d):
+            dpb = ld(Tx, n * d + m)                          # ∂p̃/∂Λ = ϑ_q(x_pre)ᵀ (+ S_x at the midpoint)
+            if mid:
+                dpb = dpb + ld(Sx, m * d + n)
+            for i in range(s):
+                B = ld(T, i * dd + m * d + n)
+                for l in range(s):
+                    if c.abar[i * s + l] != 0.0:
+                        B = B - c.abar[i * s + l] * ld(K, l * dd + m * d + n)
+                st(J, (i * d + m) * nz + iL + n, B - dpb)
+            KS = c.b[0] * ld(K, m * d + n)
+            for l in range(1, s):
+                KS = KS + c.b[l] * ld(K, l * dd + m * d + n)
+            st(J, (iL + m) * nz + iL + n, (dpb + sig * ld(Tp, n * d + m) + (sig * upost) * ld(spost, m * d + n)) + KS
+               - (1.0 + sig) * ld(T1, m * d + n))
+            for j in range(s):
+                KB = c.b[0] * c.a[j] * ld(K, m * d + n)
+                for l in range(1, s):
+                    KB = KB + c.b[l] * c.a[l * s + j] * ld(K, l * dd + m * d + n)
+                ey = sig * cpost * ld(spost, m * d + n)
+                if mid:
+                    ey = ey + 0.5 * ld(Sx, m * d + n)
+                st(J, (iL + m) * nz + j * d + n, KB + c.b[j] * ld(T, j * dd + n * d + m) + c.b[j] * ey
+                   - c.b[j] * ld(T1, m * d + n))
+
+
+@njit(inline='always', **_OPTS)
+def _main(z, jac, r, J, ev, k, h, tb, plan, d, s, w, S):
+    """Residual of the step's equations (:func:`_residual`) and, when ``jac``, their exact Jacobian
+    into J (:func:`_stage_jacobian`, :func:`_projection_jacobian`, the Lobatto rows)."""
+    c = _coefficients(tb, s)
+    px = _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S)
+    if not jac:
+        return
+    dd = d * d
+    ddd = dd * d
+    sd = s * d
+    coupled = plan.pre == PRE_UNKNOWN
+    nz = sd + (d if coupled else 0) + (d if plan.lobatto else 0)
+    for i in range(nz * nz):
+        st(J, i, 0.0)
+    Lz, pTT = at(z, sd), at(w, S.pTT)
+    if coupled and plan.pre_at == MIDPOINT:
+        _contract(at(pTT, MIDPOINT * ddd), Lz, at(w, S.S), d)        # ∂(ϑ_q(M)ᵀΛ)/∂M
+    if coupled and plan.post_at == END:
+        _contract(at(pTT, END * ddd), Lz, at(w, S.S + dd), d)       # ∂(ϑ_q(q1)ᵀΛ)/∂q1
+    _stage_jacobian(J, nz, c, plan, d, s, w, S)
+    if coupled:
+        _projection_jacobian(J, nz, px, c, plan, d, s, w, S)
+    if plan.lobatto:
+        iM = sd + d if coupled else sd
+        for i in range(s):
+            for m in range(d):
+                st(J, (i * d + m) * nz + iM + m, c.d[i] / c.b[i])
+                st(J, (iM + m) * nz + i * d + m, c.d[i])
+
+
+@njit(inline='always', **_OPTS)
+def _post(z, jac, r, J, ev, k, sig, d, w, S):
     """The consecutive projection: solve ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ for Λ
     (eq:orthogonal_projection, eq:symplectic_projection_post) with q̂, p̂ the step's q̄ + ΣbY, p̄ + ΣbG."""
     dd = d * d
-    V = L[_V]
-    qh, ph, q1, p1, tl = _at(w, V + _QH * d), _at(w, V + _PH * d), _at(w, V + _Q1 * d), _at(w, V + _P1 * d), \
-        _at(w, V + _TL * d)
-    th1, T1, TT1 = _at(w, L[_PTH] + END * d), _at(w, L[_PT] + END * dd), _at(w, L[_PTT] + END * dd * d)
+    qh, ph, q1, p1, tl = at(w, S.qh), at(w, S.ph), at(w, S.q1), at(w, S.p1), at(w, S.tl)
+    th1, T1, TT1 = at(w, S.pth + END * d), at(w, S.pT + END * dd), at(w, S.pTT + END * dd * d)
     for m in range(d):
-        q1[m] = qh[m] + sig * z[m]
-    _eval(ev, k, q1, jac, w, L, END, d)
+        st(q1, m, ld(qh, m) + sig * ld(z, m))
+    _eval(ev, k, q1, jac, w, S, END, d)
     _tapply(T1, z, tl, d)
     for m in range(d):
-        p1[m] = ph[m] + sig * tl[m]
-        r[m] = p1[m] - th1[m]
+        st(p1, m, ld(ph, m) + sig * ld(tl, m))
+        st(r, m, ld(p1, m) - ld(th1, m))
     if jac:
-        S1 = _at(w, L[_S] + dd)
+        S1 = at(w, S.S + dd)
         _contract(TT1, z, S1, d)
         for m in range(d):
             for n in range(d):
-                J[m * d + n] = sig * (T1[n * d + m] - T1[m * d + n]) + (sig * sig) * S1[m * d + n]
+                st(J, m * d + n, sig * (ld(T1, n * d + m) - ld(T1, m * d + n)) + (sig * sig) * ld(S1, m * d + n))
 
 
 @njit(**_OPTS)
-def _newton(mode, z, zev, r, scale, nz, J, piv, known, cplx, ev, k, h, tb, proj, d, s, w, L, cfg):
-    """Newton's method with the exact Jacobian, kept while it contracts (per point).
+def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP, cfg):
+    """Newton's method with the exact Jacobian, kept while it contracts, for every active lane.
 
     ``mode`` 0 solves the step's equations (:func:`_main`), 1 the consecutive projection
-    (:func:`_post`).  The Jacobian is evaluated and factorised at the first iteration (unless
-    ``known``: J and piv hold the last step's factors) and again after an iteration that shrank the
-    update by less than REFRESH.  Converged when max |δ|/scale ≤ TOL, or ≤ STALL once the update
-    stops halving; for complex z the imaginary part, read as a derivative, must pass the same test.
-    Returns (converged, iterations); the solution is ``zev``, the last iterate at which the
-    residual was evaluated, and every buffer the equations fill holds that evaluation.  The
+    (:func:`_post`).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
+    ``known``: LU and piv hold its last step's factors) and again after an iteration that shrank
+    its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ TOL, or ≤ STALL once
+    the update stops halving; for complex z the imaginary part, read as a derivative, must pass the
+    same test.  A lane that is done is held at its solution ``zev`` (the last iterate at which its
+    residual was evaluated; every buffer the equations fill holds that evaluation) while the others
+    go on.  Lanes to solve: ``f.active``; the outcome per lane in ``f.ok`` and ``f.its``.  The
     tolerances are runtime data, ``cfg`` = [TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT]
     (:class:`integrators.engine.Tolerances`); with ACCEPT a finite iterate that has not converged
     after MAXITER iterations is taken (GeometricIntegrators.jl's stopping rule).
     """
-    tol, stall, refresh = cfg[0], cfg[2] if cplx else cfg[1], cfg[4]
-    previous = np.inf
-    stale = not known
-    its = 0
+    W = nlanes(z)
+    tol, refresh = cfg[0], cfg[4]
+    active = ld(f, F.active) != 0.0
+    st(f, F.done, sel(active, 0.0, 1.0))
+    st(f, F.ok, 0.0)
+    st(f, F.its, 0.0)
+    st(f, F.prev, np.inf)
+    st(f, F.stale, sel(mand(active, mnot(known)), 1.0, 0.0))
+    scale = at(f, F.scale if mode == 0 else F.pscale)
+    Jt = at(w, S.Jt if mode == 0 else S.pJ)
+    pivt = at(ip, IP.pivt)
     for _ in range(int(cfg[3])):
+        done = ld(f, F.done) != 0.0
+        if not anyl(mnot(done)):
+            break
+        stale = ld(f, F.stale) != 0.0
         for i in range(nz):
-            zev[i] = z[i]
+            zi = sel(done, ld(zev, i), ld(z, i))
+            st(z, i, zi)
+            st(zev, i, zi)
+        jac = anyl(stale)
+        Jx, pivx = (LU, piv) if W == 1 else (Jt, pivt)   # one lane: factorise in place
         if mode == 0:
-            _main(z, stale, r, J, ev, k, h, tb, proj, d, s, w, L)
+            _main(z, jac, r, Jx, ev, k, h, tb, plan, d, s, w, S)
         else:
-            _post(z, stale, r, J, ev, k, proj[4], d, w, L)
-        if stale:
-            lu_factor(J, piv, nz)
-        lu_solve(J, piv, r, nz)                    # r is now −δ
-        size = 0.0
-        nan = False
-        finite = True
+            _post(z, jac, r, Jx, ev, k, plan.sigma, d, w, S)
+        if jac:
+            lu_factor(Jx, pivx, nz)
+            if W > 1:                             # every lane factorised, the lanes that asked keep theirs
+                for i in range(nz * nz):
+                    st(LU, i, sel(stale, ld(Jt, i), ld(LU, i)))
+                for l in range(W):
+                    if lmask(stale, l):
+                        for i in range(nz):
+                            lset(piv, i, l, lget(pivt, i, l))
+        lu_solve(LU, piv, r, nz)                  # r is now −δ
+        size = sel(done, 0.0, 0.0)
+        nan = done
+        finite = mnot(done)
         for i in range(nz):
-            z[i] = z[i] - r[i]
-            v = abs(r[i].real) / scale[i]
-            if cplx:
-                v = max(v, abs(r[i].imag) / (COMPLEX_STEP * scale[i]))
-            if v != v:
-                nan = True
-            elif v > size:
-                size = v
-            if not np.isfinite(z[i]):
-                finite = False
-        its += 1
-        if nan or not finite or not np.isfinite(size):
-            return False, its
-        theta = size / previous if np.isfinite(previous) else np.inf
-        if (size <= tol) or (size <= stall and np.isfinite(theta) and theta > 0.5):
-            return True, its
-        stale = np.isfinite(theta) and theta > refresh
-        previous = size
-    return cfg[5] != 0 and its > 0, its
+            ri = ld(r, i)
+            zi = ld(z, i) - ri
+            st(z, i, sel(done, ld(z, i), zi))
+            v = step_measure(ri, ld(scale, i), COMPLEX_STEP)
+            nan = mor(nan, v != v)
+            size = sel(v > size, v, size)
+            finite = mand(finite, np.isfinite(zi))
+        st(f, F.norm, size)
+        st(f, F.nan, sel(nan, 1.0, 0.0))
+        st(f, F.finite, sel(finite, 1.0, 0.0))
+        stall = cfg[2] if is_complex(z) else cfg[1]
+        for l in range(W):
+            if lget(f, F.done, l) != 0.0:
+                continue
+            its = lget(f, F.its, l) + 1.0
+            lset(f, F.its, l, its)
+            sz = lget(f, F.norm, l)
+            prev = lget(f, F.prev, l)
+            if lget(f, F.nan, l) != 0.0 or lget(f, F.finite, l) == 0.0 or not np.isfinite(sz):
+                lset(f, F.done, l, 1.0)
+                continue
+            theta = sz / prev if np.isfinite(prev) else np.inf
+            if (sz <= tol) or (sz <= stall and np.isfinite(theta) and theta > 0.5):
+                lset(f, F.done, l, 1.0)
+                lset(f, F.ok, l, 1.0)
+                continue
+            lset(f, F.stale, l, 1.0 if np.isfinite(theta) and theta > refresh else 0.0)
+            lset(f, F.prev, l, sz)
+    for l in range(W):                            # lanes out of iterations
+        if lget(f, F.done, l) == 0.0 and cfg[5] != 0 and lget(f, F.its, l) > 0:
+            lset(f, F.ok, l, 1.0)
 
 
-# -- one step of one point --------------------------------------------------------------------
+# -- one step of W points ---------------------------------------------------------------------
 
 @njit(**_OPTS)
-def _first_guess(ev, k, q, h, Y, d, s, w, L, ipiv):
-    """Stage displacements h·q̇(q_n) at every stage, q̇ solving Ω̄ q̇ = ∇H
+def _first_guess(ev, k, q, h, Y, where, d, s, w, S, ip, IP):
+    """Stage displacements h·q̇(q_n) at every stage (lanes ``where``), q̇ solving Ω̄ q̇ = ∇H
     (eq:euler_lagrange_equations); zero where that is not finite."""
-    _eval(ev, k, q, False, w, L, START, d)
-    T, dH, PL, v = _at(w, L[_PT]), _at(w, L[_PDH]), _at(w, L[_PL]), _at(w, L[_V] + _VF * d)
+    _eval(ev, k, q, False, w, S, START, d)
+    T, dH, PL, v = at(w, S.pT), at(w, S.pdH), at(w, S.PL), at(w, S.vf)
     for i in range(d):
         for j in range(d):
-            PL[i * d + j] = T[j * d + i] - T[i * d + j]
-        v[i] = dH[i]
+            st(PL, i * d + j, ld(T, j * d + i) - ld(T, i * d + j))
+        st(v, i, ld(dH, i))
+    ipiv = at(ip, IP.ipiv)
     lu_factor(PL, ipiv, d)
     lu_solve(PL, ipiv, v, d)
-    good = True
+    good = where
     for i in range(d):
-        if not np.isfinite(v[i]):
-            good = False
+        good = mand(good, np.isfinite(ld(v, i)))
     for i in range(s):
         for m in range(d):
-            Y[i * d + m] = h * v[m] if good else 0.0
+            st(Y, i * d + m, sel(where, sel(good, h * ld(v, m), 0.0), ld(Y, i * d + m)))
 
 
-@njit(**_OPTS)
-def _prepare(ev, k, q, p, lam, proj, d, w, L):
+@njit(inline='always', **_OPTS)
+def _prepare(ev, k, plan, d, w, S):
     """q̄, p̄ where Ψ_h starts: projected methods start on the constraint p_n = ϑ(q_n); the symplectic
     projection first adds the last step's Λ_n (eq:symplectic_projection_pre); ϑ_q(q_n) stays in
     the START slot for the symmetric projection's perturbation."""
-    pre, post = proj[0], proj[2]
-    V = L[_V]
-    qbar, pbar, tl = _at(w, V + _QBAR * d), _at(w, V + _PBAR * d), _at(w, V + _TL * d)
-    pth, pT = _at(w, L[_PTH]), _at(w, L[_PT])
-    if post:
-        _eval(ev, k, q, False, w, L, START, d)
+    q, p, lam = at(w, S.q), at(w, S.p), at(w, S.lam)
+    qbar, pbar, tl = at(w, S.qbar), at(w, S.pbar), at(w, S.tl)
+    pth, pT = at(w, S.pth), at(w, S.pT)
+    if plan.post:
+        _eval(ev, k, q, False, w, S, START, d)
     for m in range(d):
-        qbar[m] = q[m] + lam[m] if pre == 2 else q[m]
-        pbar[m] = pth[m] if post else p[m]
-    if pre == 2:
+        st(qbar, m, ld(q, m) + ld(lam, m) if plan.pre == PRE_PREVIOUS else ld(q, m))
+        st(pbar, m, ld(pth, m) if plan.post else ld(p, m))
+    if plan.pre == PRE_PREVIOUS:
         _tapply(pT, lam, tl, d)
         for m in range(d):
-            pbar[m] = pbar[m] + tl[m]
+            st(pbar, m, ld(pbar, m) + ld(tl, m))
+
+
+@njit(inline='always', **_OPTS)
+def _scale(x):
+    """max(|x|, 1), or 1 where that is not finite: the size every unknown is measured against."""
+    a = abs(x)
+    sc = sel(a > 1.0, a, 1.0)
+    return sel(np.isfinite(sc), sc, 1.0)
 
 
 @njit(**_OPTS)
-def _attempt(reuse, guess, mu0, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, cfg):
-    """One step of a point from the stage guess (and μ guess); commits the new state when it
-    succeeds.  Returns (ok, iterations)."""
-    q, p, lam, qc, pc, Ys, mus, lu, piv, have = pt_ptrs
-    pre, pre_at, post, post_at, sig, lob = proj
-    V = L[_V]
-    qbar, pbar, sY, sG = _at(w, V + _QBAR * d), _at(w, V + _PBAR * d), _at(w, V + _SY * d), _at(w, V + _SG * d)
-    p1 = _at(w, V + _P1 * d)
-    z, zev, r = _at(w, L[_Z]), _at(w, L[_ZEV]), _at(w, L[_R])
-    scale, pscale, qr = _at(rw, 0), _at(rw, nz), _at(rw, nz + d)
+def _attempt(reuse, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
+    """One step of the lanes ``f.active`` from the stage guess (and μ guess); commits the new state
+    of each lane that succeeds.  Per lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
+    W = nlanes(w)
     sd = s * d
-    coupled = pre == 1
+    coupled = plan.pre == PRE_UNKNOWN
     iL = sd
     iM = sd + d if coupled else sd
-    _prepare(ev, k, q, p, lam, proj, d, w, L)
+    q, p, lam, qc, pc = at(w, S.q), at(w, S.p), at(w, S.lam), at(w, S.qc), at(w, S.pc)
+    qbar, pbar, sY, sG, p1 = at(w, S.qbar), at(w, S.pbar), at(w, S.sY), at(w, S.sG), at(w, S.p1)
+    z, zev, r = at(w, S.z), at(w, S.zev), at(w, S.r)
+    _prepare(ev, k, plan, d, w, S)
     for i in range(sd):
-        z[i] = guess[i]
+        st(z, i, ld(guess, i))
     for m in range(d):
-        sc = max(abs(q[m]), 1.0)                # every unknown relative to its coordinate's size
-        if not np.isfinite(sc):
-            sc = 1.0
+        sc = _scale(ld(q, m))                   # every unknown relative to its coordinate's size
         for i in range(nz // d):
-            scale[i * d + m] = sc
+            st(f, F.scale + i * d + m, sc)
         if coupled:
-            z[iL + m] = lam[m]
-        if lob:
-            z[iM + m] = mu0[m]
-            sc = max(abs(pbar[m]), 1.0)
-            scale[iM + m] = sc if np.isfinite(sc) else 1.0
-    ok, its = _newton(0, z, zev, r, scale, nz, lu, piv, reuse and have[0] != 0, cplx, ev, k, h, tb, proj, d, s, w, L,
-                      cfg)
-    inc, pn, ln = _at(w, V + _INC * d), _at(w, V + _PN * d), _at(w, V + _LN * d)
+            st(z, iL + m, ld(lam, m))
+        if plan.lobatto:
+            st(z, iM + m, ld(mu0, m))
+            st(f, F.scale + iM + m, _scale(ld(pbar, m)))
+    known = mand(reuse, ld(f, F.have) != 0.0)
+    _newton(0, z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP, cfg)
+    ok = ld(f, F.ok) != 0.0
+    its = ld(f, F.its)
+    inc, pn, ln = at(w, S.inc), at(w, S.pn), at(w, S.ln)
     if coupled:                                 # Ψ_h and Λ solved together
         for m in range(d):
-            Lm = zev[iL + m]
-            inc[m] = (Lm + sY[m]) + sig * Lm
-            pn[m] = p1[m]
-            ln[m] = Lm
-    elif post:                                  # Ψ_h, then the projection
-        qh, ph, sYs = _at(w, V + _QH * d), _at(w, V + _PH * d), _at(w, V + _SYS * d)
-        pz, pzev, pr = _at(w, L[_PZ]), _at(w, L[_PZEV]), _at(w, L[_PR])
+            Lm = ld(zev, iL + m)
+            st(inc, m, (Lm + ld(sY, m)) + plan.sigma * Lm)
+            st(pn, m, ld(p1, m))
+            st(ln, m, Lm)
+    elif plan.post:                             # Ψ_h, then the projection
+        qh, ph, sYs = at(w, S.qh), at(w, S.ph), at(w, S.sYs)
+        pz, pzev, pr = at(w, S.pz), at(w, S.pzev), at(w, S.pr)
         for m in range(d):
-            sYs[m] = sY[m]
-            qh[m] = qbar[m] + sY[m]
-            ph[m] = pbar[m] + sG[m]
-            pz[m] = lam[m]
-            sc = max(abs(qh[m]), 1.0)
-            pscale[m] = sc if np.isfinite(sc) else 1.0
-        ok1, its1 = _newton(1, pz, pzev, pr, pscale, d, _at(w, L[_PL]), ipiv, False, cplx, ev, k, h, tb, proj, d, s,
-                            w, L, cfg)
-        ok = ok and ok1
-        its += its1
+            st(sYs, m, ld(sY, m))
+            st(qh, m, ld(qbar, m) + ld(sY, m))
+            st(ph, m, ld(pbar, m) + ld(sG, m))
+            st(pz, m, ld(lam, m))
+            st(f, F.pscale + m, _scale(ld(qh, m)))
+        _newton(1, pz, pzev, pr, d, at(w, S.PL), at(ip, IP.ipiv), False, ev, k, h, tb, plan, d, s, w, S, f, F, ip,
+                IP, cfg)
+        ok = mand(ok, ld(f, F.ok) != 0.0)
+        its = its + ld(f, F.its)
         for m in range(d):
-            shift = lam[m] + sYs[m] if pre == 2 else sYs[m]
-            inc[m] = shift + sig * pzev[m]
-            pn[m] = p1[m]
-            ln[m] = pzev[m]
+            shift = ld(lam, m) + ld(sYs, m) if plan.pre == PRE_PREVIOUS else ld(sYs, m)
+            st(inc, m, shift + plan.sigma * ld(pzev, m))
+            st(pn, m, ld(p1, m))
+            st(ln, m, ld(pzev, m))
     else:
         for m in range(d):
-            inc[m] = sY[m]
-            ln[m] = 0.0
-    qn, qcn, pcn = _at(w, V + _QN * d), _at(w, V + _QCN * d), _at(w, V + _PCN * d)
+            st(inc, m, ld(sY, m))
+            st(ln, m, 0.0)
+    active = ld(f, F.active) != 0.0
+    st(f, F.itn, ld(f, F.itn) + sel(active, its, 0.0))
+    qn, qcn, pcn = at(w, S.qn), at(w, S.qcn), at(w, S.pcn)
     for m in range(d):                          # compensated summation of the increments
-        y = inc[m] + qc[m]
-        t = q[m] + y
-        qcn[m] = y - (t - q[m])
-        qn[m] = t
-        if post:
-            pcn[m] = pc[m]
+        y = ld(inc, m) + ld(qc, m)
+        t = ld(q, m) + y
+        st(qcn, m, y - (t - ld(q, m)))
+        st(qn, m, t)
+        if plan.post:
+            st(pcn, m, ld(pc, m))
         else:
-            y = sG[m] + pc[m]
-            t = p[m] + y
-            pcn[m] = y - (t - p[m])
-            pn[m] = t
-        qr[m] = qn[m].real
-    ok = ok and inside(qr, k)
+            y = ld(sG, m) + ld(pc, m)
+            t = ld(p, m) + y
+            st(pcn, m, y - (t - ld(p, m)))
+            st(pn, m, t)
     for m in range(d):
-        if not (np.isfinite(pn[m]) and np.isfinite(ln[m])):
-            ok = False
-    if ok:
+        ok = mand(ok, mand(np.isfinite(ld(pn, m)), np.isfinite(ld(ln, m))))
+    st(f, F.okstep, sel(mand(active, ok), 1.0, 0.0))
+    for l in range(W):
+        if lget(f, F.okstep, l) != 0.0:
+            for m in range(d):
+                qr[m] = re(lget(qn, m, l))
+            if not inside(qr, k):
+                lset(f, F.okstep, l, 0.0)
+    commit = ld(f, F.okstep) != 0.0
+    if anyl(commit):
+        Ys, mus = at(w, S.Y), at(w, S.mu)
         for m in range(d):
-            q[m] = qn[m]
-            qc[m] = qcn[m]
-            p[m] = pn[m]
-            pc[m] = pcn[m]
-            lam[m] = ln[m]
-            if lob:
-                mus[m] = zev[iM + m]
+            st(q, m, sel(commit, ld(qn, m), ld(q, m)))
+            st(qc, m, sel(commit, ld(qcn, m), ld(qc, m)))
+            st(p, m, sel(commit, ld(pn, m), ld(p, m)))
+            st(pc, m, sel(commit, ld(pcn, m), ld(pc, m)))
+            st(lam, m, sel(commit, ld(ln, m), ld(lam, m)))
+            if plan.lobatto:
+                st(mus, m, sel(commit, ld(zev, iM + m), ld(mus, m)))
         for i in range(sd):
-            Ys[i] = zev[i]
-    return ok, its
+            st(Ys, i, sel(commit, ld(zev, i), ld(Ys, i)))
 
 
 @njit(**_OPTS)
-def _step(t_next, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, flags, tb_ptr, counts, cfg):
-    """Advance one point by one step.  A step that fails from the extrapolated guess (and the last
-    step's Jacobian) is tried once more from h·q̇(q_n) with a fresh Jacobian; a point that still
+def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
+    """Advance the live lanes by one step.  A step that fails from the extrapolated guess (and the
+    last step's Jacobian) is tried once more from h·q̇(q_n) with a fresh Jacobian; a lane that still
     fails (Newton does not converge, a value is not finite, q leaves the domain) is frozen at its
     last good state with its breakdown time set to ``t_next``."""
-    q, Ys, mus = pt_ptrs[0], pt_ptrs[5], pt_ptrs[6]
-    have = pt_ptrs[9]
-    hist, live = flags
-    ss = s * s
-    E = _at(tb, 4 * ss + 3 * s)
-    guess = _at(w, L[_GUESS])
-    fresh = hist[0] == 0
-    if fresh:
-        _first_guess(ev, k, q, h, guess, d, s, w, L, ipiv)
-    else:                                       # Lagrange extrapolation of the last step's stages
-        for i in range(s):
-            for m in range(d):
-                acc = E[i * s] * Ys[m]
-                for j in range(1, s):
-                    acc = acc + E[i * s + j] * Ys[j * d + m]
-                guess[i * d + m] = acc
-    ok, its = _attempt(True, guess, mus, cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv, pt_ptrs, cfg)
-    counts[0] += its
-    if not ok and not fresh:
-        _first_guess(ev, k, q, h, guess, d, s, w, L, ipiv)
-        ok, its = _attempt(False, guess, _at(w, L[_ZERO]), cplx, ev, inside, k, h, tb, proj, d, s, nz, w, L, rw, ipiv,
-                           pt_ptrs, cfg)
-        counts[0] += its
-    have[0] = 1 if ok else 0
-    if ok:
-        counts[1] += 1
-        hist[0] = 1
-    else:
-        live[0] = 0
-        tb_ptr[0] = t_next
-    return ok
+    live = ld(f, F.live) != 0.0
+    fresh = ld(f, F.hist) == 0.0
+    c = _coefficients(tb, s)
+    Ys, guess = at(w, S.Y), at(w, S.guess)
+    for i in range(s):                          # Lagrange extrapolation of the last step's stages
+        for m in range(d):
+            acc = c.E[i * s] * ld(Ys, m)
+            for j in range(1, s):
+                acc = acc + c.E[i * s + j] * ld(Ys, j * d + m)
+            st(guess, i * d + m, acc)
+    first = mand(live, fresh)
+    if anyl(first):
+        _first_guess(ev, k, at(w, S.q), h, guess, first, d, s, w, S, ip, IP)
+    st(f, F.active, sel(live, 1.0, 0.0))
+    _attempt(True, guess, at(w, S.mu), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
+    ok = ld(f, F.okstep) != 0.0
+    retry = mand(live, mand(mnot(ok), mnot(fresh)))
+    if anyl(retry):
+        _first_guess(ev, k, at(w, S.q), h, guess, retry, d, s, w, S, ip, IP)
+        st(f, F.active, sel(retry, 1.0, 0.0))
+        _attempt(False, guess, at(w, S.zero), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
+        ok = sel(retry, ld(f, F.okstep), sel(ok, 1.0, 0.0)) != 0.0
+    st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
+    good = mand(live, ok)
+    st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
+    st(f, F.hist, sel(good, 1.0, ld(f, F.hist)))
+    broke = mand(live, mnot(ok))
+    st(f, F.tbrk, sel(broke, t_next, ld(f, F.tbrk)))
+    st(f, F.live, sel(broke, 0.0, ld(f, F.live)))
+    return anyl(good)
 
 
 @njit(**_OPTS)
-def _block(W, RW, IP, CN, lo, hi, ev, inside, kp, h, tb, proj, t0, first, nsteps, cplx, st, d, s, nz, L, cfg):
-    """Points lo … hi − 1 of the state through ``nsteps`` steps, with the thread's scratch arrays.
+def _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP):
+    """The state of points pt0 … pt0 + nl − 1 into the lanes (lanes past nl copy the first point and
+    stay dead)."""
+    q, p, Lam, qc, pc, Y, mu, hist, live, tbrk, itn, stp, lu, piv, have = st_
+    for l in range(W):
+        pt = pt0 + (l if l < nl else 0)
+        for m in range(d):
+            lset(w, S.q + m, l, q[pt, m])
+            lset(w, S.p + m, l, p[pt, m])
+            lset(w, S.lam + m, l, Lam[pt, m])
+            lset(w, S.qc + m, l, qc[pt, m])
+            lset(w, S.pc + m, l, pc[pt, m])
+            lset(w, S.mu + m, l, mu[pt, m])
+        for i in range(s):
+            for m in range(d):
+                lset(w, S.Y + i * d + m, l, Y[pt, i, m])
+        valid = have[pt] != 0 and l < nl          # factors kept from the last step
+        for i in range(nz):
+            for j in range(nz):
+                lset(w, S.lu + i * nz + j, l, lu[pt, i, j] if valid else 0.0)
+            # (a lane's solve runs whether or not its factors are used: its pivots must be rows)
+            lset(ip, IP.piv + i, l, piv[pt, i] if valid else i)
+        lset(f, F.have, l, float(have[pt]))
+        lset(f, F.hist, l, float(hist[pt]))
+        lset(f, F.live, l, float(live[pt]) if l < nl else 0.0)
+        lset(f, F.tbrk, l, tbrk[pt])
+        lset(f, F.itn, l, 0.0)
+        lset(f, F.stp, l, 0.0)
+
+
+@njit(**_OPTS)
+def _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP):
+    q, p, Lam, qc, pc, Y, mu, hist, live, tbrk, itn, stp, lu, piv, have = st_
+    for l in range(nl):
+        pt = pt0 + l
+        for m in range(d):
+            q[pt, m] = lget(w, S.q + m, l)
+            p[pt, m] = lget(w, S.p + m, l)
+            Lam[pt, m] = lget(w, S.lam + m, l)
+            qc[pt, m] = lget(w, S.qc + m, l)
+            pc[pt, m] = lget(w, S.pc + m, l)
+            mu[pt, m] = lget(w, S.mu + m, l)
+        for i in range(s):
+            for m in range(d):
+                Y[pt, i, m] = lget(w, S.Y + i * d + m, l)
+        for i in range(nz):
+            for j in range(nz):
+                lu[pt, i, j] = lget(w, S.lu + i * nz + j, l)
+            piv[pt, i] = lget(ip, IP.piv + i, l)
+        have[pt] = 1 if lget(f, F.have, l) != 0.0 else 0
+        hist[pt] = 1 if lget(f, F.hist, l) != 0.0 else 0
+        live[pt] = 1 if lget(f, F.live, l) != 0.0 else 0
+        tbrk[pt] = lget(f, F.tbrk, l)
+        itn[pt] += int(lget(f, F.itn, l))
+        stp[pt] += int(lget(f, F.stp, l))
+
+
+@njit(**_OPTS)
+def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto):
+    """Points lo … hi − 1 of the state through ``nsteps`` steps, W (= len(proto)) at a time, with
+    the thread's scratch arrays.
 
     The scratch arrays are arguments (not locals) on purpose: the caller holds them for the whole
     call, while numba would free a local array after its last use as an array, i.e. while the raw
     pointers taken from it are still in use.
     """
-    q, p, Lam, qc, pc, Y, mu, hist, live, tbrk, itn, stp, lu, piv, have = st
-    w, rw, ipiv, counts = _at(W, 0), _at(RW, 0), _at(IP, 0), _at(CN, 0)
-    for pt in range(lo, hi):
-        if live[pt] == 0:
+    S, F, IP = layout(s, d, nz)       # (made here: numba's parallel loop takes no named tuples)
+    plan = Plan(*plan)
+    W = len(proto)
+    w, f, ip, qr = lanes(WS, 0, proto), lanes(FS, 0, proto), lanes(IS, 0, proto), _at(QR, 0)
+    live = st_[8]
+    for pt0 in range(lo, hi, W):
+        nl = min(W, hi - pt0)
+        alive = False
+        for pt in range(pt0, pt0 + nl):
+            alive = alive or live[pt] != 0
+        if not alive:
             continue
-        pt_ptrs = (_at(q, pt * d), _at(p, pt * d), _at(Lam, pt * d), _at(qc, pt * d), _at(pc, pt * d),
-                   _at(Y, pt * s * d), _at(mu, pt * d), _at(lu, pt * nz * nz), _at(piv, pt * nz), _at(have, pt))
-        flags = (_at(hist, pt), _at(live, pt))
-        CN[0] = 0
-        CN[1] = 0
+        _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP)
         for j in range(nsteps):
-            if not _step(t0 + (first + j) * h, cplx, ev, inside, kp, h, tb, proj, d, s, nz, w, L, rw, ipiv,
-                         pt_ptrs, flags, _at(tbrk, pt), counts, cfg):
+            if not _step(t0 + (first + j) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
                 break
-        itn[pt] += CN[0]
-        stp[pt] += CN[1]
+        _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP)
 
 
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, k, tab, proj, h, t0, first, nsteps, cplx, block, st, dim, tolerances):
-    """Advance every live point of the state tuple ``st`` by ``nsteps`` steps, the step numbered
-    ``first`` aiming at t0 + first·h.  Points are taken ``block`` at a time, blocks spread over
-    the threads; a point's steps never depend on its block, its thread or its neighbours.
+def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto):
+    """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
+    ``first`` aiming at t0 + first·h.  Points are taken ``block`` at a time, blocks spread over the
+    threads, and W = len(proto) at a time within a block (``ev`` must be the W-lane point function);
+    a point's steps never depend on its block, its lanes, its thread or its neighbours.
 
-    st = (q, p, Lam, q_comp, p_comp, Y, mu, have_history, live, breakdown_time, iterations, steps,
+    st_ = (q, p, Lam, q_comp, p_comp, Y, mu, have_history, live, breakdown_time, iterations, steps,
     lu, piv, have_lu), the boolean flags viewed as uint8.  ``tolerances``: Newton's [TOL, STALL,
-    STALL_COMPLEX, MAXITER, REFRESH, ACCEPT] as float64 (:class:`integrators.engine.Tolerances`).
+    STALL_COMPLEX, MAXITER, REFRESH, ACCEPT] as float64 (:class:`integrators.engine.Tolerances`);
     """
-    q, Y, lu = st[0], st[5], st[12]
+    q, Y, lu = st_[0], st_[5], st_[12]
     n = q.shape[0]
     d = len(dim)           # ``dim`` is a tuple of d zeros: d is a compile-time constant, one compilation
     #                        per dimension, and the compiler unrolls the loops over coordinates
     s = Y.shape[1]
     nz = lu.shape[1]
-    L = _layout(s, d, nz)
+    W = len(proto)
+    S, F, IP = layout(s, d, nz)
+    nw, nf, ni = S.size * W, F.size * W, IP.size * W
     kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
     nblocks = (n + block - 1) // block
     for bi in prange(nblocks):
-        W = np.zeros(L[_NBUF], q.dtype)
-        RW = np.zeros(nz + 2 * d)
-        IP = np.zeros(d, np.int64)
-        CN = np.zeros(2, np.int64)
-        _block(W, RW, IP, CN, bi * block, min(n, (bi + 1) * block), ev, inside, kp, h, tb, proj, t0, first, nsteps,
-               cplx, st, d, s, nz, L, cfg)
+        WS = np.zeros(nw, q.dtype)
+        FS = np.zeros(nf)
+        IS = np.zeros(ni, np.int64)
+        QR = np.zeros(d)
+        _block(WS, FS, IS, QR, bi * block, min(n, (bi + 1) * block), ev, inside, kp, h, tb, plan, t0, first, nsteps,
+               st_, d, s, nz, cfg, proto)
 
 
 @njit(**_OPTS)
-def _probe(W, zz, r, J, ev, k, tab, proj, h, q, p, lam, jac, s, L):
+def _probe(WS, zz, r, J, ev, k, tab, plan, h, q, p, lam, jac, s, S):
     d = q.shape[0]
-    w = _at(W, 0)
-    _prepare(ev, _at(k, 0), _at(q, 0), _at(p, 0), _at(lam, 0), proj, d, w, L)
-    _main(_at(zz, 0), jac, _at(r, 0), _at(J, 0), ev, _at(k, 0), h, _at(tab, 0), proj, d, s, w, L)
+    w = lanes(WS, 0, (0,))
+    for m in range(d):
+        st(w, S.q + m, q[m])
+        st(w, S.p + m, p[m])
+        st(w, S.lam + m, lam[m])
+    _prepare(ev, _at(k, 0), plan, d, w, S)
+    _main(_at(zz, 0), jac, _at(r, 0), _at(J, 0), ev, _at(k, 0), h, _at(tab, 0), plan, d, s, w, S)
 
 
-@njit(**_OPTS)
-def probe(ev, k, tab, proj, h, q, p, lam, z, jac):
+def probe(ev, k, tab, plan, h, q, p, lam, z, jac):
     """The step's residual at z (and its Jacobian when ``jac``) for one point (q, p, Λ): the equations
     Newton solves, for tests (the Jacobian against complex-step differences of the residual)."""
     d = q.shape[0]
     nz = z.shape[0]
-    s = 0
-    for cand in range(1, 9):                    # the flat tableau holds 5 s² + 3 s numbers
-        if 5 * cand * cand + 3 * cand == tab.shape[0]:
-            s = cand
-    L = _layout(s, d, nz)
-    W = np.zeros(L[_NBUF], z.dtype)
+    s = next(c for c in range(1, 9) if 5 * c * c + 3 * c == tab.shape[0])   # the flat tableau: 5 s² + 3 s
+    S, F, _ = layout(s, d, nz)
+    WS = np.zeros(S.size, z.dtype)
     r = np.zeros(nz, z.dtype)
     J = np.zeros(nz * nz, z.dtype)
     zz = z.copy()
-    _probe(W, zz, r, J, ev, k, tab, proj, h, q, p, lam, jac, s, L)
+    _probe(WS, zz, r, J, ev, k, tab, Plan(*plan), h, q, p, lam, jac, s, S)
     return r, J.reshape((nz, nz))

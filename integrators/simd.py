@@ -1,0 +1,657 @@
+"""Points in SIMD lanes for numba: a vector type, pointers that load and store it, and masks.
+
+The step kernel is written once against a handful of functions — :func:`ld`, :func:`st`,
+:func:`sel`, :func:`anyl`, :func:`lget`, :func:`lset`, :func:`nlanes` — and arithmetic operators.
+Given plain pointers (``CPointer(float64)`` or ``complex128``) they are ordinary scalar loads,
+stores and ``a if m else b``: that is the scalar path, one point at a time.  Given a
+:class:`LanePtr` (W points interleaved, lane index innermost) the same source handles W points in
+lockstep: a value is an LLVM ``<W x double>`` (:class:`Vec`), ``+ − × ÷``, ``sqrt`` and ``abs``
+are packed instructions, comparisons give a per-lane :class:`Mask`, and every decision is a
+select.  LLVM would not vectorise the scalar loops over lanes on its own (it cannot prove that
+numba's pointers do not alias), so the vector type is explicit.
+
+Bits: packed IEEE add, subtract, multiply, divide and square root round each lane exactly as the
+scalar instruction does, and there is no fused multiply–add (no fastmath, no contraction).
+Functions LLVM has no exact vector form for (``exp``, ``log``, ``sin``, ``pow`` …) are called lane
+by lane through numba's own scalar implementation.  So a lane's value is bitwise the scalar path's
+(tests/test_lanes.py checks it for every admissible pair).
+"""
+from __future__ import annotations
+
+import operator
+
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import models
+from numba.extending import intrinsic, overload, register_model
+
+
+class Vec(types.Type):
+    """W float64 values, one per lane."""
+
+    def __init__(self, W):
+        self.W = W
+        super().__init__(name=f"Vec{W}")
+
+
+class Mask(types.Type):
+    """W booleans, one per lane."""
+
+    def __init__(self, W):
+        self.W = W
+        super().__init__(name=f"Mask{W}")
+
+
+class LanePtr(types.Type):
+    """A pointer to W-lane interleaved data: logical element i of lane l lives at i·W + l."""
+
+    def __init__(self, dtype, W):
+        self.dtype, self.W = dtype, W
+        super().__init__(name=f"LanePtr({dtype}, {W})")
+
+
+@register_model(Vec)
+class _VecModel(models.PrimitiveModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, ir.VectorType(ir.DoubleType(), fe_type.W))
+
+
+@register_model(Mask)
+class _MaskModel(models.PrimitiveModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, ir.VectorType(ir.IntType(1), fe_type.W))
+
+
+@register_model(LanePtr)
+class _LanePtrModel(models.PrimitiveModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, dmm.lookup(fe_type.dtype).get_value_type().as_pointer())
+
+
+def _splat(builder, value, W):
+    vt = ir.VectorType(value.type, W)
+    v = builder.insert_element(ir.Constant(vt, ir.Undefined), value, ir.Constant(ir.IntType(32), 0))
+    return builder.shuffle_vector(v, ir.Constant(vt, ir.Undefined), ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W))
+
+
+def _as_vec(context, builder, ty, val, W):
+    """A Vec or a real number as a <W x double>."""
+    if isinstance(ty, Vec):
+        return val
+    return _splat(builder, context.cast(builder, val, ty, types.float64), W)
+
+
+def _intp(context, builder, ty, val):
+    return context.cast(builder, val, ty, types.intp)
+
+
+def _W(W):
+    return ir.Constant(ir.IntType(64), W)
+
+
+def _width(*tys):
+    ws = {t.W for t in tys if isinstance(t, (Vec, Mask, LanePtr))}
+    return ws.pop() if len(ws) == 1 else None
+
+
+def _real(t):
+    return isinstance(t, (types.Float, types.Integer, types.Boolean)) and not isinstance(t, types.Complex)
+
+
+# -- pointers ----------------------------------------------------------------------------------
+
+
+@intrinsic
+def _at(typingctx, base, off):
+    """Pointer to element ``off`` (flat, C order) of an array, or ``off`` elements past a pointer."""
+    if isinstance(base, types.Array):
+        def codegen(context, builder, sig, args):
+            ary = context.make_array(sig.args[0])(context, builder, args[0])
+            return builder.gep(ary.data, [args[1]])
+        return types.CPointer(base.dtype)(base, off), codegen
+    if isinstance(base, types.CPointer):
+        def codegen(context, builder, sig, args):
+            return builder.gep(args[0], [args[1]])
+        return base(base, off), codegen
+
+@intrinsic
+def lanes(typingctx, base, off, proto):
+    """A lane pointer to element ``off`` of ``base`` (array or pointer), W = len(proto), with
+    offsets counted in logical elements (× W).  W = 1 gives a plain pointer: the scalar path."""
+    W = len(proto) if isinstance(proto, types.BaseTuple) else None
+    if W is None:
+        return None
+    dtype = base.dtype
+    if W > 1 and dtype not in (types.float64, types.int64):
+        return None                             # lanes of doubles (values) and of int64 (pivots) only
+    rt = types.CPointer(dtype) if W == 1 else LanePtr(dtype, W)
+
+    def codegen(context, builder, sig, args):
+        if isinstance(sig.args[0], types.Array):
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+        else:
+            data = args[0]
+        return builder.gep(data, [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(W))])
+    return rt(base, off, proto), codegen
+
+
+@intrinsic
+def _lp_at(typingctx, p, off):
+    if not isinstance(p, LanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(sig.args[0].W))])
+    return p(p, off), codegen
+
+
+@intrinsic
+def _lp_load(typingctx, p, i):
+    if not isinstance(p, LanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        ptr = builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(W))])
+        vp = builder.bitcast(ptr, ir.VectorType(ir.DoubleType(), W).as_pointer())
+        return builder.load(vp, align=8)
+    return Vec(p.W)(p, i), codegen
+
+
+@intrinsic
+def _lp_store(typingctx, p, i, v):
+    if not isinstance(p, LanePtr) or not (isinstance(v, Vec) or _real(v)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        ptr = builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(W))])
+        vp = builder.bitcast(ptr, ir.VectorType(ir.DoubleType(), W).as_pointer())
+        builder.store(_as_vec(context, builder, sig.args[2], args[2], W), vp, align=8)
+        return context.get_dummy_value()
+    return types.void(p, i, v), codegen
+
+
+@intrinsic
+def _lp_elem(typingctx, p, i, lane):
+    """Pointer to one lane's element (scalar access to lane data)."""
+    if not isinstance(p, LanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        idx = builder.add(builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(W)),
+                          _intp(context, builder, sig.args[2], args[2]))
+        return builder.gep(args[0], [idx])
+    return types.CPointer(p.dtype)(p, i, lane), codegen
+
+
+def ld(p, i):
+    """Element i (all lanes) of p."""
+
+
+def st(p, i, v):
+    """Element i of p = v (a scalar goes to every lane)."""
+
+
+def lget(p, i, lane):
+    """Element i of one lane, as a scalar."""
+
+
+def lset(p, i, lane, v):
+    """Element i of one lane = v."""
+
+
+def nlanes(p):
+    """The lane count W of a pointer (1 for a plain pointer)."""
+
+
+def at(p, off):
+    """p advanced by ``off`` logical elements."""
+
+
+@overload(ld, inline="never")
+def _ld(p, i):
+    if isinstance(p, LanePtr):
+        return lambda p, i: _lp_load(p, i)
+    if isinstance(p, types.CPointer):
+        return lambda p, i: p[i]
+
+
+@overload(st, inline="never")
+def _st(p, i, v):
+    if isinstance(p, LanePtr):
+        return lambda p, i, v: _lp_store(p, i, v)
+    if isinstance(p, types.CPointer):
+        def impl(p, i, v):
+            p[i] = v
+        return impl
+
+
+@overload(lget, inline="never")
+def _lget(p, i, lane):
+    if isinstance(p, LanePtr):
+        return lambda p, i, lane: _lp_elem(p, i, lane)[0]
+    if isinstance(p, types.CPointer):
+        return lambda p, i, lane: p[i]
+
+
+@overload(lset, inline="never")
+def _lset(p, i, lane, v):
+    if isinstance(p, LanePtr):
+        def impl(p, i, lane, v):
+            _lp_elem(p, i, lane)[0] = v
+        return impl
+    if isinstance(p, types.CPointer):
+        def impl(p, i, lane, v):
+            p[i] = v
+        return impl
+
+
+@overload(nlanes, inline="never")
+def _nlanes(p):
+    if isinstance(p, LanePtr):
+        W = p.W
+        return lambda p: W
+    if isinstance(p, types.CPointer):
+        return lambda p: 1
+
+
+# -- values ------------------------------------------------------------------------------------
+
+def _binary(op, fop):
+    @intrinsic
+    def vop(typingctx, a, b):
+        W = _width(a, b)
+        if W is None or not all(isinstance(t, Vec) or _real(t) for t in (a, b)):
+            return None
+
+        def codegen(context, builder, sig, args):
+            x = _as_vec(context, builder, sig.args[0], args[0], W)
+            y = _as_vec(context, builder, sig.args[1], args[1], W)
+            return getattr(builder, fop)(x, y)
+        return Vec(W)(a, b), codegen
+
+    @overload(op, inline="never")
+    def ov(a, b):
+        if isinstance(a, Vec) or isinstance(b, Vec):
+            return lambda a, b: vop(a, b)
+    return vop
+
+
+_binary(operator.add, "fadd")
+_binary(operator.sub, "fsub")
+_binary(operator.mul, "fmul")
+_binary(operator.truediv, "fdiv")
+
+
+def _compare(op, code):
+    @intrinsic
+    def vcmp(typingctx, a, b):
+        W = _width(a, b)
+        if W is None or not all(isinstance(t, Vec) or _real(t) for t in (a, b)):
+            return None
+
+        def codegen(context, builder, sig, args):
+            x = _as_vec(context, builder, sig.args[0], args[0], W)
+            y = _as_vec(context, builder, sig.args[1], args[1], W)
+            return builder.fcmp_ordered(code, x, y) if code != "!=" else builder.fcmp_unordered(code, x, y)
+        return Mask(W)(a, b), codegen
+
+    @overload(op, inline="never")
+    def ov(a, b):
+        if isinstance(a, Vec) or isinstance(b, Vec):
+            return lambda a, b: vcmp(a, b)
+
+
+# Python's float comparisons: ordered (false on NaN) except !=, which is true on NaN
+_compare(operator.lt, "<")
+_compare(operator.le, "<=")
+_compare(operator.gt, ">")
+_compare(operator.ge, ">=")
+_compare(operator.eq, "==")
+_compare(operator.ne, "!=")
+
+
+@intrinsic
+def _vneg(typingctx, a):
+    if not isinstance(a, Vec):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.fneg(args[0])
+    return a(a), codegen
+
+
+@overload(operator.neg, inline="never")
+def _neg(a):
+    if isinstance(a, Vec):
+        return lambda a: _vneg(a)
+
+
+def _unary_intrinsic(name):
+    @intrinsic
+    def vf(typingctx, a):
+        if not isinstance(a, Vec):
+            return None
+
+        def codegen(context, builder, sig, args):
+            fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(args[0].type, [args[0].type]),
+                                                f"llvm.{name}.v{sig.args[0].W}f64")
+            return builder.call(fn, [args[0]])
+        return a(a), codegen
+    return vf
+
+
+_vsqrt = _unary_intrinsic("sqrt")
+_vfabs = _unary_intrinsic("fabs")
+
+
+@overload(np.sqrt, inline="never")
+def _sqrt(a):
+    if isinstance(a, Vec):
+        return lambda a: _vsqrt(a)
+
+
+@overload(abs, inline="never")
+def _abs(a):
+    if isinstance(a, Vec):
+        return lambda a: _vfabs(a)
+
+
+@overload(np.abs, inline="never")
+def _npabs(a):
+    if isinstance(a, Vec):
+        return lambda a: _vfabs(a)
+
+
+@intrinsic
+def _vget(typingctx, v, lane):
+    if not isinstance(v, Vec):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.extract_element(args[0], args[1])
+    return types.float64(v, lane), codegen
+
+
+@intrinsic
+def _vset(typingctx, v, lane, x):
+    if not isinstance(v, Vec):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.insert_element(args[0], context.cast(builder, args[2], sig.args[2], types.float64), args[1])
+    return v(v, lane, x), codegen
+
+
+def _per_lane_unary(fn):
+    """fn on a Vec, lane by lane, through numba's scalar implementation (the scalar path's bits)."""
+    @overload(fn)
+    def ov(a):
+        if isinstance(a, Vec):
+            W = a.W
+
+            def impl(a):
+                out = a
+                for l in range(W):
+                    out = _vset(out, l, fn(_vget(a, l)))
+                return out
+            return impl
+
+
+for _fn in (np.exp, np.log, np.sin, np.cos, np.tan, np.arcsin, np.arccos, np.arctan, np.sinh, np.cosh, np.tanh,
+            np.sign, np.log1p, np.expm1):
+    _per_lane_unary(_fn)
+
+
+def _per_lane_binary(fn):
+    @overload(fn)
+    def ov(a, b):
+        if isinstance(a, Vec) and isinstance(b, Vec):
+            W = a.W
+
+            def impl(a, b):
+                out = a
+                for l in range(W):
+                    out = _vset(out, l, fn(_vget(a, l), _vget(b, l)))
+                return out
+            return impl
+        if isinstance(a, Vec) and _real(b):
+            W = a.W
+
+            def impl(a, b):
+                out = a
+                for l in range(W):
+                    out = _vset(out, l, fn(_vget(a, l), b))
+                return out
+            return impl
+        if _real(a) and isinstance(b, Vec):
+            W = b.W
+
+            def impl(a, b):
+                out = b
+                for l in range(W):
+                    out = _vset(out, l, fn(a, _vget(b, l)))
+                return out
+            return impl
+
+
+for _fn in (np.arctan2, np.power, operator.pow):
+    _per_lane_binary(_fn)
+
+
+@intrinsic
+def _misfinite(typingctx, a):
+    if not isinstance(a, Vec):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        fabs = cgutils.get_or_insert_function(builder.module, ir.FunctionType(args[0].type, [args[0].type]),
+                                              f"llvm.fabs.v{W}f64")
+        inf = _splat(builder, ir.Constant(ir.DoubleType(), float("inf")), W)
+        return builder.fcmp_ordered("!=", builder.call(fabs, [args[0]]), inf)
+    return Mask(a.W)(a), codegen
+
+
+@overload(np.isfinite, inline="never")
+def _isfinite(a):
+    if isinstance(a, Vec):
+        return lambda a: _misfinite(a)
+
+
+# -- masks ---------------------------------------------------------------------------------------
+
+def sel(m, a, b):
+    """a where m, else b (per lane)."""
+
+
+def mand(a, b):
+    """a and b (per lane)."""
+
+
+def mor(a, b):
+    """a or b (per lane)."""
+
+
+def mnot(a):
+    """not a (per lane)."""
+
+
+def anyl(m):
+    """Whether any lane of m is true."""
+
+
+def lmask(m, lane):
+    """One lane of a mask, as a bool."""
+
+
+@intrinsic
+def _vsel(typingctx, m, a, b):
+    W = _width(m, a, b)
+    if W is None or not isinstance(m, (Mask, types.Boolean)):
+        return None
+    if not all(isinstance(t, Vec) or _real(t) for t in (a, b)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        mm = args[0] if isinstance(sig.args[0], Mask) else _splat(builder, context.cast(builder, args[0], sig.args[0], types.boolean), W)
+        return builder.select(mm, _as_vec(context, builder, sig.args[1], args[1], W),
+                              _as_vec(context, builder, sig.args[2], args[2], W))
+    return Vec(W)(m, a, b), codegen
+
+
+@overload(sel, inline="never")
+def _sel(m, a, b):
+    if isinstance(m, Mask) or isinstance(a, Vec) or isinstance(b, Vec):
+        return lambda m, a, b: _vsel(m, a, b)
+    if isinstance(m, types.Boolean):
+        return lambda m, a, b: a if m else b
+
+
+def _mask_binary(fn, op):
+    @intrinsic
+    def mop(typingctx, a, b):
+        W = _width(a, b)
+        if W is None:
+            return None
+
+        def codegen(context, builder, sig, args):
+            xs = [v if isinstance(t, Mask) else _splat(builder, context.cast(builder, v, t, types.boolean), W)
+                  for t, v in zip(sig.args, args)]
+            return getattr(builder, op)(*xs)
+        return Mask(W)(a, b), codegen
+
+    @overload(fn, inline="never")
+    def ov(a, b):
+        if isinstance(a, Mask) or isinstance(b, Mask):
+            return lambda a, b: mop(a, b)
+        if op == "and_":
+            return lambda a, b: a and b
+        return lambda a, b: a or b
+
+
+_mask_binary(mand, "and_")
+_mask_binary(mor, "or_")
+
+
+@intrinsic
+def _mnot(typingctx, a):
+    if not isinstance(a, Mask):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.not_(args[0])
+    return a(a), codegen
+
+
+@overload(mnot, inline="never")
+def _mnot_ov(a):
+    if isinstance(a, Mask):
+        return lambda a: _mnot(a)
+    if isinstance(a, types.Boolean):
+        return lambda a: not a
+
+
+@intrinsic
+def _many(typingctx, m):
+    if not isinstance(m, Mask):
+        return None
+
+    def codegen(context, builder, sig, args):
+        bits = builder.bitcast(args[0], ir.IntType(sig.args[0].W))
+        return builder.icmp_unsigned("!=", bits, ir.Constant(ir.IntType(sig.args[0].W), 0))
+    return types.boolean(m), codegen
+
+
+@overload(anyl, inline="never")
+def _anyl(m):
+    if isinstance(m, Mask):
+        return lambda m: _many(m)
+    if isinstance(m, types.Boolean):
+        return lambda m: m
+
+
+@intrinsic
+def _mget(typingctx, m, lane):
+    if not isinstance(m, Mask):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.extract_element(args[0], args[1])
+    return types.boolean(m, lane), codegen
+
+
+@overload(lmask, inline="never")
+def _lmask(m, lane):
+    if isinstance(m, Mask):
+        return lambda m, lane: _mget(m, lane)
+    if isinstance(m, types.Boolean):
+        return lambda m, lane: m
+
+
+@overload(at, inline="never")
+def _at_ov(p, off):
+    if isinstance(p, LanePtr):
+        return lambda p, off: _lp_at(p, off)
+    if isinstance(p, types.CPointer):
+        return lambda p, off: _at(p, off)
+
+
+# -- what the scalar and complex paths need as well ---------------------------------------------
+
+def raw(p):
+    """The plain pointer under a lane pointer (what a compiled point function takes)."""
+
+
+def re(x):
+    """The real part (x itself for a real value or a Vec)."""
+
+
+def is_complex(p):
+    """Whether a pointer's data are complex (a compile-time constant)."""
+
+
+def step_measure(r, scale, cs):
+    """|r|/scale; for a complex-step value also |Im r|/(cs·scale), the derivative's own measure."""
+
+
+@intrinsic
+def _lp_raw(typingctx, p):
+    if not isinstance(p, LanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return args[0]
+    return types.CPointer(p.dtype)(p), codegen
+
+
+@overload(raw, inline="never")
+def _raw(p):
+    if isinstance(p, LanePtr):
+        return lambda p: _lp_raw(p)
+    if isinstance(p, types.CPointer):
+        return lambda p: p
+
+
+@overload(re, inline="never")
+def _re(x):
+    if isinstance(x, types.Complex):
+        return lambda x: x.real
+    return lambda x: x
+
+
+@overload(is_complex, inline="never")
+def _is_complex(p):
+    c = isinstance(p.dtype, types.Complex)
+    return lambda p: c
+
+
+@overload(step_measure, inline="never")
+def _step_measure(r, scale, cs):
+    if isinstance(r, types.Complex):
+        return lambda r, scale, cs: max(abs(r.real) / scale, abs(r.imag) / (cs * scale))
+    return lambda r, scale, cs: abs(r) / scale

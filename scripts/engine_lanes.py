@@ -1,0 +1,164 @@
+"""The lane kernel against the scalar kernel it replaced, side by side in one run (docs/benchmarks.md).
+
+    python scripts/engine_lanes.py [--points 10000] [--previous 0581e1c] [--out docs/figures/engine_lanes.json]
+
+* The previous kernel (integrators/kernel.py at ``--previous``, one point at a time) is read from
+  git history into a temporary module and driven with the same generated point functions, so both
+  kernels run in this process on the same points.
+* For each pair: point-steps per second of the previous kernel, of the new kernel's scalar path
+  (W = 1) and of its lanes (W = kernel.LANES), one thread, guiding_centre_symmetric at h = 10 with
+  the benchmark's 10⁴ points near the default loop (2 warm-up steps, then 10 steps in one call);
+  W = 8 on 2 threads; Newton iterations per step; and whether every field of the three states is
+  bitwise equal.
+* The instructions of the compiled kernel (its non-inlined functions for W = 8 and W = 1): packed
+  double-precision arithmetic (``v…pd``) against scalar (``v…sd``).
+* A flop count per Newton iteration *as coded* (the generated point functions' operators and the
+  kernel's loops, Jacobian refreshes left out, so a lower bound), times the measured iterations per
+  step, over the clock: flop per cycle before and after.
+"""
+import argparse
+import importlib.util
+import json
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import integrators
+import invariants
+from integrators import kernel
+from integrators.engine import _load, point_functions, set_threads
+
+ROOT = Path(__file__).resolve().parents[1]
+PAIRS = [("GLRK2", "symmetric"), ("GLRK1", "none"), ("SRK3", "symmetric"), ("GLRK4", "symmetric"),
+         ("LobIIIA3", "standard"), ("GLRK2", "symplectic"), ("GLRK3", "midpoint")]
+FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "live", "iterations", "steps")
+
+
+def previous_kernel(rev):
+    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:integrators/kernel.py"], capture_output=True,
+                         text=True, check=True).stdout
+    folder = Path(tempfile.mkdtemp())
+    (folder / "previous_kernel.py").write_text(src)
+    spec = importlib.util.spec_from_file_location("previous_kernel", folder / "previous_kernel.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def rate(eng, q0, run):
+    st = eng.state(q0)
+    run(st, 1, 2)
+    its0, steps0 = st.iterations.sum(), st.steps.sum()
+    t = time.perf_counter()
+    run(st, 3, 10)
+    wall = time.perf_counter() - t
+    return st, q0.shape[0] * 10 / wall, (st.iterations.sum() - its0) / max(1, st.steps.sum() - steps0)
+
+
+def asm_counts():
+    """Packed vs scalar double arithmetic in the kernel's compiled functions, per lane count."""
+    out = {}
+    pat_p = re.compile(r"\bv(add|sub|mul|div|sqrt|min|max)pd\b")
+    pat_s = re.compile(r"\bv(add|sub|mul|div|sqrt|min|max)sd\b")
+    for W in (1, kernel.LANES):
+        packed = scalar = 0
+        for fn in (kernel._newton, kernel._attempt, kernel._step, kernel._first_guess):
+            for sig in fn.signatures:
+                text = str(sig)
+                lane_sig = f"LanePtr(float64, {kernel.LANES})" in text
+                if (W > 1) != lane_sig or "complex" in text:
+                    continue
+                asm = fn.inspect_asm(sig)
+                packed += len(pat_p.findall(asm))
+                scalar += len(pat_s.findall(asm))
+        out[W] = {"packed": packed, "scalar": scalar, "packed_share": packed / max(1, packed + scalar)}
+    return out
+
+
+def _ops(lines):
+    return sum(len(re.findall(r"(?<![*(eE])[-+*/](?![*])", ln.split("=", 1)[1])) for ln in lines if "=" in ln)
+
+
+def flops_per_iteration(system, tableau, eng):
+    """Floating-point operations of one Newton iteration as coded (residual and solve; the Jacobian
+    and its factorisation, refreshed now and then, are left out)."""
+    src = _load(system).__file__
+    body = Path(src).read_text().split("def _evaluate_real")[1].split("def _evaluate_complex")[0]
+    light = [ln for ln in body.splitlines() if ln.startswith("    _x") or ln.startswith("    st(")]
+    ev = _ops([ln.replace("st(", "x = (") for ln in light])
+    s, d, nz = tableau.s, system.d, eng.nz
+    stages = s * (d * (4 * s) + ev + d * (2 * d) + 2 * d) + d * 8 * s          # Q, ϑ…, G, Σ b
+    rows = s * d * (4 * s + 3)                                                  # the stage residuals
+    coupled = eng.plan.pre == kernel.PRE_UNKNOWN
+    proj = (ev + 2 * d * d + 6 * d) if coupled else 0
+    solve = 2 * nz * nz + 4 * nz                                                # substitutions, update, norm
+    return stages + rows + proj + solve
+
+
+def clock_hz():
+    try:
+        mhz = [float(ln.split(":")[1]) for ln in open("/proc/cpuinfo") if ln.startswith("cpu MHz")]
+        return 1e6 * max(mhz)
+    except (OSError, ValueError):
+        return float("nan")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--points", type=int, default=10000)
+    ap.add_argument("--previous", default="0581e1c")
+    ap.add_argument("--out", default=str(ROOT / "docs/figures/engine_lanes.json"))
+    args = ap.parse_args()
+    old = previous_kernel(args.previous)
+    sy = integrators.system("guiding_centre_symmetric")
+    rng = np.random.default_rng(0)
+    q0 = invariants.loop("guiding_centre", args.points)
+    q0 = q0 + 1e-3 * rng.standard_normal(q0.shape)
+    ev, inside = point_functions(sy)
+    hz = clock_hz()
+    rows = []
+    for tab, proj in PAIRS:
+        tableau = integrators.tableau(tab)
+        eng = integrators.Engine(sy, tableau, proj, 10.0)
+        set_threads(1)
+
+        def run_old(st, first, n):
+            old.advance(ev, inside, eng.k, eng.tab, tuple(eng.plan), eng.h, 0.0, first, n, False, 64,
+                        st._tuple(eng.nz), (0,) * sy.d, eng._cfg)
+        s_old, r_old, its = rate(eng, q0, run_old)
+        s_1, r_1, _ = rate(eng, q0, lambda st, f, n: eng.advance(st, f, n, lanes=1))
+        s_w, r_w, _ = rate(eng, q0, lambda st, f, n: eng.advance(st, f, n, lanes=kernel.LANES))
+        set_threads(2)
+        _, r_w2, _ = rate(eng, q0, lambda st, f, n: eng.advance(st, f, n, lanes=kernel.LANES))
+        set_threads(None)
+        same = all(np.array_equal(getattr(s_old, f), getattr(x, f)) for x in (s_1, s_w) for f in FIELDS)
+        flops = flops_per_iteration(sy, tableau, eng) * its
+        row = dict(pair=f"{tab}-{proj}", previous=r_old, scalar_path=r_1, lanes=r_w, lanes_2_threads=r_w2,
+                   speedup=r_w / r_old, threads_2_over_1=r_w2 / r_w, iterations_per_step=its, bitwise_equal=same,
+                   flops_per_step=flops, flop_per_cycle_previous=flops * r_old / hz,
+                   flop_per_cycle_lanes=flops * r_w / hz)
+        rows.append(row)
+        print(f"{row['pair']:>20}: previous {r_old:>10,.0f}  W=1 {r_1:>10,.0f}  W={kernel.LANES} {r_w:>10,.0f} "
+              f"({row['speedup']:.2f}×)  2 threads {r_w2:>10,.0f} ({row['threads_2_over_1']:.2f}×)  "
+              f"{its:.2f} it/step  ≥{flops:.0f} flop/step  flop/cycle {row['flop_per_cycle_previous']:.2f} → "
+              f"{row['flop_per_cycle_lanes']:.2f}  bits equal {same}", flush=True)
+    asm = asm_counts()
+    for W, c in asm.items():
+        print(f"W={W}: {c['packed']} packed and {c['scalar']} scalar double instructions "
+              f"({100 * c['packed_share']:.0f} % packed)")
+    out = dict(machine=platform.processor() or platform.machine(), clock_hz=hz, points=args.points,
+               previous=args.previous, lanes=kernel.LANES, rows=rows, asm=asm,
+               command="python scripts/engine_lanes.py --points %d" % args.points)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,84 @@
+"""Points in SIMD lanes give every point the bits of the scalar path (integrators/kernel.py, simd.py).
+
+The kernel advances W = kernel.LANES points in lockstep with every decision per lane; these tests
+hold it to its promise: a point's bits are those it gets alone on the scalar path (W = 1), for
+every admissible pair, for lanes that break down or need other iteration counts beside it, and
+for blocks that end part-way through a group of lanes."""
+import numpy as np
+import pytest
+
+import integrators
+from integrators import kernel
+from integrators.projections import PROJECTIONS, admission
+
+PAIRS = [(t, p) for t in integrators.TABLEAU_NAMES for p in PROJECTIONS
+         if admission(integrators.tableau(t), p) is None]
+FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time", "iterations",
+          "steps")
+
+
+def _run(eng, q0, steps, lanes, block=64):
+    st = eng.state(q0)
+    eng.advance(st, 1, steps, block=block, lanes=lanes)
+    return st
+
+
+def _same(a, b):
+    return [f for f in FIELDS if not np.array_equal(getattr(a, f), getattr(b, f))]
+
+
+@pytest.mark.parametrize("sysname", ["point_vortices", "lotka_volterra_2d", "guiding_centre_tokamak"])
+def test_lanes_give_the_scalar_paths_bits_on_every_pair(sysname, rng):
+    """11 points (a group of 8 and one of 3 with 5 empty lanes), 3 steps, W = 8 against W = 1: every
+    field of the state bitwise equal, for all 114 admissible pairs."""
+    sy = integrators.system(sysname)
+    q0 = np.array(sy.defaults["q0"]) * (1 + 0.02 * rng.standard_normal((11, sy.d)))
+    bad = {}
+    for tab, proj in PAIRS:
+        eng = integrators.Engine(sy, integrators.tableau(tab), proj, sy.defaults["h"])
+        diff = _same(_run(eng, q0, 3, 1), _run(eng, q0, 3, kernel.LANES))
+        if diff:
+            bad[(tab, proj)] = diff
+    assert not bad, bad
+
+
+def test_mixed_lanes_each_point_gets_the_bits_it_has_alone(rng):
+    """Lotka–Volterra at a step so large that some points leave the domain (break down) while their
+    lane neighbours go on, and neighbours need different Newton iteration counts: each point's
+    state after the run is bitwise the state it reaches alone (one point, the scalar path), also
+    with blocks that split the groups of lanes differently."""
+    sy = integrators.system("lotka_volterra_2d")
+    q0 = np.abs(np.array(sy.defaults["q0"]) * (1 + 0.6 * rng.standard_normal((21, sy.d)))) + 0.05
+    eng = integrators.Engine(sy, integrators.tableau("GLRK2"), "symmetric", 0.9)
+    together = _run(eng, q0, 12, kernel.LANES)
+    assert 0 < together.live.sum() < len(q0)                   # breakdowns beside survivors
+    assert len(np.unique(together.iterations[together.live])) > 1
+    for block in (5, 16):
+        assert not _same(together, _run(eng, q0, 12, kernel.LANES, block=block)), block
+    for i in range(len(q0)):
+        alone = _run(eng, q0[i:i + 1], 12, 1)
+        for f in FIELDS:
+            assert np.array_equal(getattr(together, f)[i], getattr(alone, f)[0]), (i, f)
+
+
+def test_the_lane_kernel_agrees_with_the_scalar_kernel_across_calls_and_resumes(rng):
+    """Steps grouped into different kernel calls, with the Newton factors dropped in between (as at
+    a checkpoint), give the same bits on W = 8 as on W = 1."""
+    sy = integrators.system("guiding_centre_tokamak")
+    q0 = np.array(sy.defaults["q0"]) * (1 + 0.02 * rng.standard_normal((13, sy.d)))
+    eng = integrators.Engine(sy, integrators.tableau("SRK3"), "midpoint", sy.defaults["h"])
+    states = []
+    for W in (1, kernel.LANES):
+        st = eng.state(q0)
+        eng.advance(st, 1, 2, lanes=W)
+        st.forget_jacobians()
+        eng.advance(st, 3, 3, lanes=W)
+        states.append(st)
+    assert not _same(*states)
+
+
+def test_lanes_must_be_one_or_the_kernels_width():
+    sy = integrators.system("point_vortices")
+    eng = integrators.Engine(sy, integrators.tableau("GLRK1"), "none", 0.1)
+    with pytest.raises(ValueError, match="lanes must be 1 or"):
+        eng.advance(eng.state(np.array([sy.defaults["q0"]])), 1, 1, lanes=3)
