@@ -214,7 +214,9 @@ _LOADED = {}
 
 
 def _load(system):
-    key = _key(system)
+    key = getattr(system, "_engine_key", None)
+    if key is None:
+        key = system._engine_key = _key(system)       # (sympy's srepr of every expression: once)
     if key in _LOADED:
         return _LOADED[key]
     folder = cache_dir() / "kernels"

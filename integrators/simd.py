@@ -407,34 +407,36 @@ for _fn in (np.exp, np.log, np.sin, np.cos, np.tan, np.arcsin, np.arccos, np.arc
     _per_lane_unary(_fn)
 
 
+@intrinsic
+def _vec_like(typingctx, x, v):
+    """x as a Vec of v's width (a real number goes to every lane)."""
+    W = _width(x, v)
+    if W is None or not (isinstance(x, Vec) or _real(x)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return _as_vec(context, builder, sig.args[0], args[0], W)
+    return Vec(W)(x, v), codegen
+
+
 def _per_lane_binary(fn):
     @overload(fn)
     def ov(a, b):
-        if isinstance(a, Vec) and isinstance(b, Vec):
-            W = a.W
+        if (isinstance(a, Vec) or isinstance(b, Vec)) and all(isinstance(t, Vec) or _real(t) for t in (a, b)):
+            W = _width(a, b)
+            if _real(b):                # a scalar exponent stays what it is (int or float), as on the scalar path
+                def impl(a, b):
+                    out = a
+                    for l in range(W):
+                        out = _vset(out, l, fn(_vget(a, l), b))
+                    return out
+                return impl
 
             def impl(a, b):
-                out = a
+                x, y = _vec_like(a, b), _vec_like(b, a)
+                out = x
                 for l in range(W):
-                    out = _vset(out, l, fn(_vget(a, l), _vget(b, l)))
-                return out
-            return impl
-        if isinstance(a, Vec) and _real(b):
-            W = a.W
-
-            def impl(a, b):
-                out = a
-                for l in range(W):
-                    out = _vset(out, l, fn(_vget(a, l), b))
-                return out
-            return impl
-        if _real(a) and isinstance(b, Vec):
-            W = b.W
-
-            def impl(a, b):
-                out = b
-                for l in range(W):
-                    out = _vset(out, l, fn(a, _vget(b, l)))
+                    out = _vset(out, l, fn(_vget(x, l), _vget(y, l)))
                 return out
             return impl
 

@@ -24,6 +24,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numba import njit
+
+from integrators.simd import _at
 
 from . import spectral
 
@@ -140,6 +143,52 @@ def corrected_omega(system, q, lam, h, paper_sign=False):
     return np.concatenate([top, bottom], axis=-2)
 
 
+@njit(cache=True, error_model="numpy")
+def _omega_integrands(ev, k, q, lam, qs, qt, ls, lt, h2, sgn, corrected, nc, co, th, T, TT, dH, HH):
+    """Per point, by the system's compiled point function: nc = q_σ·Ω̄·q_τ and, with ``corrected``,
+    co = x_σ·Ω_λ·x_τ with Ω_λ the block matrix of :func:`corrected_omega` written out,
+    q_σ·Ω̄·q_τ + sgn h² (q_σ·L·λ_τ − λ_σ·L·q_τ) − h² λ_σ·Ω̄·λ_τ, L_ij = λ^k ϑ_{k,ij}."""
+    n, d = q.shape
+    for i in range(n):
+        ev(_at(q, i * d), _at(k, 0), corrected, _at(th, 0), _at(T, 0), _at(TT, 0), _at(dH, 0), _at(HH, 0))
+        a = 0.0
+        for m in range(d):
+            for l in range(d):
+                a += qs[i, m] * (T[l * d + m] - T[m * d + l]) * qt[i, l]
+        nc[i] = a
+        if corrected:
+            b, c = 0.0, 0.0
+            for m in range(d):
+                for l in range(d):
+                    L = 0.0
+                    for j in range(d):
+                        L += lam[i, j] * TT[(j * d + m) * d + l]
+                    b += qs[i, m] * L * lt[i, l] - ls[i, m] * L * qt[i, l]
+                    c += ls[i, m] * (T[l * d + m] - T[m * d + l]) * lt[i, l]
+            co[i] = a + sgn * h2 * b - h2 * c
+
+
+def _compiled_integrands(system, q, lam, qs, qt, ls, lt, h, paper_sign, corrected):
+    """(noncanonical, corrected or None) integrands on the surface's points, or None where the
+    system has no generated point functions (a duck-typed system: the numpy route is used)."""
+    if not hasattr(system, "theta_expr"):
+        return None
+    from integrators.engine import point_functions
+    ev, _ = point_functions(system)
+    d = q.shape[-1]
+    flat = lambda x: np.ascontiguousarray(x.reshape(-1, d), dtype=float)
+    n = q.shape[0] * q.shape[1]
+    zero = np.zeros((n, d))
+    nc, co = np.empty(n), np.empty(n)
+    k = np.array([float(v) for v in system.params.values()] or [0.0])
+    _omega_integrands(ev, k, flat(q), flat(lam) if corrected else zero, flat(qs), flat(qt),
+                      flat(ls) if corrected else zero, flat(lt) if corrected else zero, float(h or 0.0) ** 2,
+                      -1.0 if paper_sign else 1.0, corrected, nc, co, np.empty(d), np.empty(d * d),
+                      np.empty(d * d * d), np.empty(d), np.empty(d * d))
+    shape = q.shape[:2]
+    return nc.reshape(shape), (co.reshape(shape) if corrected else None)
+
+
 def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None,
                      paper_sign=False) -> InvariantValue:
     """I₂ = ∫∫ Ω_ab x_σ^a x_τ^b dσ dτ over a surface q (n_σ, n_τ, d) at Chebyshev points.
@@ -148,32 +197,58 @@ def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=No
     'corrected' (dϑ_λ on (q, λ), needs system, lam, h), or a callable Ω(q) -> (n_σ, n_τ, d, d):
     the matrix of a two-form ½Ω_ab dq^a ∧ dq^b of your own.
     """
+    return second_invariants(q, [form], system, p, lam, h, paper_sign)[form]
+
+
+def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sign=False) -> dict:
+    """{form: I₂} for several forms of one surface, sharing what they share: the transforms and
+    derivatives of q, and ϑ_q, ϑ_qq from one compiled pass over the points for noncanonical and
+    corrected together.  Each form's value is bitwise what it is alone (tests/test_invariants.py)."""
     q = _check(q, 3, "surface q")
-    qs, qt = spectral.chebyshev_derivative(q, 0), spectral.chebyshev_derivative(q, 1)
-    fields = [q]
-    if callable(form):
-        Om = _user_values(form, q, q.shape + (q.shape[-1],), "two-form")
-        integrand = np.einsum("...i,...ij,...j->...", qs, Om, qt)
-    elif form == "canonical":
-        p = _check(_need(p, "p", form), 3, "p")
-        ps, pt = spectral.chebyshev_derivative(p, 0), spectral.chebyshev_derivative(p, 1)
-        integrand = np.sum(ps * qt - pt * qs, axis=-1)
-        fields.append(p)
-    elif form == "noncanonical":
-        Om = _need(system, "system", form).Omega(q)
-        integrand = np.einsum("...i,...ij,...j->...", qs, Om, qt)
-    elif form == "corrected":
-        lam = _check(_need(lam, "lam", form), 3, "lam")
-        h = float(_need(h, "h", form))
-        Om = corrected_omega(_need(system, "system", form), q, lam, h, paper_sign)
-        xs = np.concatenate([qs, spectral.chebyshev_derivative(lam, 0)], axis=-1)
-        xt = np.concatenate([qt, spectral.chebyshev_derivative(lam, 1)], axis=-1)
-        integrand = np.einsum("...i,...ij,...j->...", xs, Om, xt)
-        fields = [np.concatenate([q, h * lam], axis=-1)]     # hλ has the units of q (dq − h dλ)
-    else:
-        raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
-    res = max(spectral.surface_tail(f) for f in fields)
-    return InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)
+    d = q.shape[-1]
+    for form in forms:
+        if not callable(form) and form not in FORMS:
+            raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
+    named = [f for f in forms if not callable(f)]
+    cq0 = spectral.chebyshev_coefficients(q, 0)
+    qs, qt = spectral.chebyshev_derivative(q, 0, cq0), spectral.chebyshev_derivative(q, 1)
+    tail_q = spectral.surface_tail(q, cq0)
+    out, omega = {}, {}
+    if "noncanonical" in named or "corrected" in named:
+        sy = _need(system, "system", "noncanonical" if "noncanonical" in named else "corrected")
+        want = "corrected" in named
+        if want:
+            lam = _check(_need(lam, "lam", "corrected"), 3, "lam")
+            h = float(_need(h, "h", "corrected"))
+            ls, lt = spectral.chebyshev_derivative(lam, 0), spectral.chebyshev_derivative(lam, 1)
+        else:
+            ls = lt = None
+        got = _compiled_integrands(sy, q, lam, qs, qt, ls, lt, h, paper_sign, want)
+        if got is None:                     # a duck-typed system: the numpy route
+            Om = sy.Omega(q)
+            got = (np.einsum("...i,...ij,...j->...", qs, Om, qt),
+                   np.einsum("...i,...ij,...j->...", np.concatenate([qs, ls], axis=-1),
+                             corrected_omega(sy, q, lam, h, paper_sign), np.concatenate([qt, lt], axis=-1))
+                   if want else None)
+        omega = {"noncanonical": got[0], "corrected": got[1]}
+    for form in forms:
+        res = tail_q
+        if callable(form):
+            Om = _user_values(form, q, q.shape + (d,), "two-form")
+            integrand = np.einsum("...i,...ij,...j->...", qs, Om, qt)
+        elif form == "canonical":
+            p = _check(_need(p, "p", form), 3, "p")
+            cp0 = spectral.chebyshev_coefficients(p, 0)
+            ps, pt = spectral.chebyshev_derivative(p, 0, cp0), spectral.chebyshev_derivative(p, 1)
+            integrand = np.sum(ps * qt - pt * qs, axis=-1)
+            res = max(tail_q, spectral.surface_tail(p, cp0))
+        elif form == "noncanonical":
+            integrand = omega["noncanonical"]
+        else:
+            integrand = omega["corrected"]
+            res = spectral.surface_tail(np.concatenate([q, h * lam], axis=-1))   # hλ has the units of q
+        out[form] = InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)
+    return out
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,6 +19,7 @@
 import argparse
 import importlib.util
 import json
+import os
 import platform
 import re
 import subprocess
@@ -63,22 +64,29 @@ def rate(eng, q0, run):
 
 
 def asm_counts():
-    """Packed vs scalar double arithmetic in the kernel's compiled functions, per lane count."""
+    """Packed vs scalar double arithmetic in the compiled kernel (``advance`` with everything it
+    calls linked in) for d = 4, W = 1 and W = LANES.  numba shows no assembly of cached code, so this
+    compiles afresh in a child process with an empty numba cache (about two minutes)."""
+    code = ("import json, numpy as np, integrators, sys; sys.path.insert(0, %r); import engine_lanes; "
+            "sy = integrators.system('guiding_centre_symmetric'); "
+            "eng = integrators.Engine(sy, integrators.tableau('GLRK2'), 'symmetric', 10.0); "
+            "[eng.advance(eng.state(np.tile(sy.defaults['q0'], (8, 1))), 1, 1, lanes=W) for W in (1, %d)]; "
+            "print(json.dumps(engine_lanes._asm_here()))") % (str(Path(__file__).parent), kernel.LANES)
+    env = dict(os.environ, NUMBA_CACHE_DIR=tempfile.mkdtemp())
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return {int(k): v for k, v in json.loads(r.stdout.strip().splitlines()[-1]).items()}
+
+
+def _asm_here():
     out = {}
     pat_p = re.compile(r"\bv(add|sub|mul|div|sqrt|min|max)pd\b")
     pat_s = re.compile(r"\bv(add|sub|mul|div|sqrt|min|max)sd\b")
-    for W in (1, kernel.LANES):
-        packed = scalar = 0
-        for fn in (kernel._newton, kernel._attempt, kernel._step, kernel._first_guess):
-            for sig in fn.signatures:
-                text = str(sig)
-                lane_sig = f"LanePtr(float64, {kernel.LANES})" in text
-                if (W > 1) != lane_sig or "complex" in text:
-                    continue
-                asm = fn.inspect_asm(sig)
-                packed += len(pat_p.findall(asm))
-                scalar += len(pat_s.findall(asm))
-        out[W] = {"packed": packed, "scalar": scalar, "packed_share": packed / max(1, packed + scalar)}
+    for sig in kernel.advance.signatures:
+        if "complex" in str(sig[10]) or "UniTuple(int64 x 4)" not in str(sig[11]):
+            continue
+        asm = kernel.advance.inspect_asm(sig)
+        packed, scalar = len(pat_p.findall(asm)), len(pat_s.findall(asm))
+        out[len(sig[13])] = {"packed": packed, "scalar": scalar, "packed_share": packed / max(1, packed + scalar)}
     return out
 
 
@@ -100,6 +108,41 @@ def flops_per_iteration(system, tableau, eng):
     proj = (ev + 2 * d * d + 6 * d) if coupled else 0
     solve = 2 * nz * nz + 4 * nz                                                # substitutions, update, norm
     return stages + rows + proj + solve
+
+
+def output_vs_step(h=10.0, reps=10):
+    """One output of the paper's sets (I₁ of the 2,000-point loop and I₂ of the 100 × 100 surface in
+    all three forms, the surface's forms together as the driver computes them, and the energy,
+    momentum and constraint errors of all 12,000 points) against one GLRK2-symmetric step of the
+    same 12,000 points in lanes, one thread."""
+    from invariants.forms import second_invariants
+    gc = integrators.system("guiding_centre_symmetric")
+    loop, surf = invariants.loop("guiding_centre", 2000), invariants.surface("guiding_centre", 100, 100)
+    pts = np.concatenate([loop, surf.reshape(-1, 4)])
+    set_threads(1)
+    eng = integrators.Engine(gc, integrators.tableau("GLRK2"), "symmetric", h)
+    st = eng.state(pts)
+    eng.advance(st, 1, 2)
+    q, p, lam = st.q, st.p, st.Lam / h
+    H0, P0 = gc.H(pts), gc.momentum(pts)
+
+    def output():
+        for fm in invariants.FORMS:
+            invariants.first_invariant(q[:2000], fm, system=gc, p=p[:2000], lam=lam[:2000], h=h)
+        second_invariants(q[2000:].reshape(surf.shape), list(invariants.FORMS), system=gc,
+                          p=p[2000:].reshape(surf.shape), lam=lam[2000:].reshape(surf.shape), h=h)
+        np.max(np.abs((gc.H(q) - H0) / H0)), np.max(np.abs(gc.momentum(q) - P0)), np.max(np.abs(p - gc.theta(q)))
+
+    output()
+    t = time.perf_counter()
+    for _ in range(reps):
+        output()
+    t_out = (time.perf_counter() - t) / reps
+    t = time.perf_counter()
+    eng.advance(st, 3, reps)
+    t_step = (time.perf_counter() - t) / reps
+    set_threads(None)
+    return dict(output_s=t_out, step_s=t_step, output_in_steps=t_out / t_step)
 
 
 def clock_hz():
@@ -153,8 +196,11 @@ def main():
     for W, c in asm.items():
         print(f"W={W}: {c['packed']} packed and {c['scalar']} scalar double instructions "
               f"({100 * c['packed_share']:.0f} % packed)")
+    ovs = output_vs_step()
+    print(f"one output of the paper's sets {1e3 * ovs['output_s']:.1f} ms, one step of their 12,000 points "
+          f"{1e3 * ovs['step_s']:.1f} ms: {ovs['output_in_steps']:.2f} steps")
     out = dict(machine=platform.processor() or platform.machine(), clock_hz=hz, points=args.points,
-               previous=args.previous, lanes=kernel.LANES, rows=rows, asm=asm,
+               previous=args.previous, lanes=kernel.LANES, rows=rows, asm=asm, output_vs_step=ovs,
                command="python scripts/engine_lanes.py --points %d" % args.points)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1))
