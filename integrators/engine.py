@@ -36,7 +36,7 @@ import numpy as np
 
 from .projections import admission, projection_record
 
-CODEGEN_VERSION = "3"          # bump when the generated source changes shape
+CODEGEN_VERSION = "4"          # bump when the generated source changes shape
 BLOCK = 64                     # points per block of the kernel's thread loop (any value gives the same bits)
 
 CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
@@ -180,6 +180,12 @@ def _generate_source(system) -> str:
             lines += ["try:", f"    {name} = cfunc({sig}, cache=True, error_model='numpy')(_{name})",
                       "except Exception:     # a function without a lane form: the engine runs W = 1",
                       f"    {name} = None"]
+    scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
+    lines += ["", "", "@cfunc(types.void(_F, _F, _F), cache=True, error_model='numpy')",
+              "def scalars(_qin, _k, _out):",
+              "    \"\"\"H and the Noether momentum (0 when the system has none) at one point.\"\"\""]
+    lines += [f"    _q{i} = _qin[{i}]" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
+    lines += _body_plain(scal, ["_out[0]", "_out[1]"], q, params, 4)
     lines += ["", "", "@cfunc(types.boolean(_F, _F), cache=True, error_model='numpy')",
               "def inside(_qin, _k):",
               f"    for _i in range({d}):",
@@ -193,6 +199,11 @@ def _generate_source(system) -> str:
         lines += [f"    if not ({t} > 0):\n        return False" for t, _ in g]
     lines += ["    return True", ""]
     return "\n".join(lines)
+
+
+def sympy_zero():
+    import sympy
+    return sympy.Float(0.0)
 
 
 def _body_plain(exprs, targets, qsyms, params, indent):
@@ -232,6 +243,11 @@ def _load(system):
     spec.loader.exec_module(mod)
     _LOADED[key] = mod
     return mod
+
+
+def scalar_function(system):
+    """The compiled ``scalars(q, k, out)`` of ``system``: out = [H(q), momentum(q) or 0]."""
+    return _load(system).scalars
 
 
 def point_functions(system, complex_step=False, lanes=False):

@@ -51,7 +51,9 @@ REFRESH = 0.01          # a fresh Jacobian when an iteration contracted by less 
 #                         (0.03 suited the numpy engine, whose Jacobians cost many numpy calls; compiled, a
 #                         fresh Jacobian is cheap enough that 0.01 is faster: GLRK1-none 8.0 -> 6.7 Newton
 #                         iterations per step and +9 % point-steps/s, GLRK2-symmetric 7.5 -> 6.5 and +3 %, on
-#                         guiding_centre_symmetric at h = 10; docs/benchmarks.md)
+#                         guiding_centre_symmetric at h = 10; docs/benchmarks.md.  With lanes, 0.1 is faster
+#                         for s >= 2 (a refresh factorises all lanes), but it moves every documented result's
+#                         last bits: Tolerances(refresh=0.1) for now; docs/benchmarks.md.)
 
 LANES = 8               # W of the vector path: 8 doubles fill an AVX-512 register, two AVX2 ones
 
@@ -468,7 +470,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
     (:class:`integrators.engine.Tolerances`); with ACCEPT a finite iterate that has not converged
     after MAXITER iterations is taken (GeometricIntegrators.jl's stopping rule).
     """
-    W = nlanes(z)
+    W = nlanes(z)           # (mode and nz arrive as runtime ints: a literal would compile this twice)
     tol, refresh = cfg[0], cfg[4]
     active = ld(f, F.active) != 0.0
     st(f, F.done, sel(active, 0.0, 1.0))
@@ -543,6 +545,13 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
 
 # -- one step of W points ---------------------------------------------------------------------
 
+@njit(inline='always', **_OPTS)
+def _none(f, F):
+    """A mask with no lane set (of the same type as any other: one compilation of its users)."""
+    x = ld(f, F.done)
+    return mand(x != x, x == x)
+
+
 @njit(**_OPTS)
 def _first_guess(ev, k, q, h, Y, where, d, s, w, S, ip, IP):
     """Stage displacements h·q̇(q_n) at every stage (lanes ``where``), q̇ solving Ω̄ q̇ = ∇H
@@ -592,9 +601,10 @@ def _scale(x):
 
 
 @njit(**_OPTS)
-def _attempt(reuse, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
-    """One step of the lanes ``f.active`` from the stage guess (and μ guess); commits the new state
-    of each lane that succeeds.  Per lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
+def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
+    """One step of the lanes ``f.active`` from the stage guess (and μ guess), starting from the kept
+    Newton factors in the lanes ``known``; commits the new state of each lane that succeeds.  Per
+    lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
     W = nlanes(w)
     sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
@@ -615,8 +625,8 @@ def _attempt(reuse, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
         if plan.lobatto:
             st(z, iM + m, ld(mu0, m))
             st(f, F.scale + iM + m, _scale(ld(pbar, m)))
-    known = mand(reuse, ld(f, F.have) != 0.0)
-    _newton(0, z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP, cfg)
+    _newton(nz - nz, z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP,
+            cfg)
     ok = ld(f, F.ok) != 0.0
     its = ld(f, F.its)
     inc, pn, ln = at(w, S.inc), at(w, S.pn), at(w, S.ln)
@@ -635,8 +645,8 @@ def _attempt(reuse, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
             st(ph, m, ld(pbar, m) + ld(sG, m))
             st(pz, m, ld(lam, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
-        _newton(1, pz, pzev, pr, d, at(w, S.PL), at(ip, IP.ipiv), False, ev, k, h, tb, plan, d, s, w, S, f, F, ip,
-                IP, cfg)
+        _newton(nz - nz + 1, pz, pzev, pr, nz - nz + d, at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, k, h, tb,
+                plan, d, s, w, S, f, F, ip, IP, cfg)
         ok = mand(ok, ld(f, F.ok) != 0.0)
         its = its + ld(f, F.its)
         for m in range(d):
@@ -707,13 +717,14 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
     if anyl(first):
         _first_guess(ev, k, at(w, S.q), h, guess, first, d, s, w, S, ip, IP)
     st(f, F.active, sel(live, 1.0, 0.0))
-    _attempt(True, guess, at(w, S.mu), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
+    _attempt(ld(f, F.have) != 0.0, guess, at(w, S.mu), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr,
+             cfg)
     ok = ld(f, F.okstep) != 0.0
     retry = mand(live, mand(mnot(ok), mnot(fresh)))
     if anyl(retry):
         _first_guess(ev, k, at(w, S.q), h, guess, retry, d, s, w, S, ip, IP)
         st(f, F.active, sel(retry, 1.0, 0.0))
-        _attempt(False, guess, at(w, S.zero), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
+        _attempt(_none(f, F), guess, at(w, S.zero), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
         ok = sel(retry, ld(f, F.okstep), sel(ok, 1.0, 0.0)) != 0.0
     st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
     good = mand(live, ok)

@@ -73,7 +73,8 @@ class _LanePtrModel(models.PrimitiveModel):
 def _splat(builder, value, W):
     vt = ir.VectorType(value.type, W)
     v = builder.insert_element(ir.Constant(vt, ir.Undefined), value, ir.Constant(ir.IntType(32), 0))
-    return builder.shuffle_vector(v, ir.Constant(vt, ir.Undefined), ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W))
+    zeros = ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W)
+    return builder.shuffle_vector(v, ir.Constant(vt, ir.Undefined), zeros)
 
 
 def _as_vec(context, builder, ty, val, W):
@@ -500,7 +501,8 @@ def _vsel(typingctx, m, a, b):
         return None
 
     def codegen(context, builder, sig, args):
-        mm = args[0] if isinstance(sig.args[0], Mask) else _splat(builder, context.cast(builder, args[0], sig.args[0], types.boolean), W)
+        mm = args[0] if isinstance(sig.args[0], Mask) else \
+            _splat(builder, context.cast(builder, args[0], sig.args[0], types.boolean), W)
         return builder.select(mm, _as_vec(context, builder, sig.args[1], args[1], W),
                               _as_vec(context, builder, sig.args[2], args[2], W))
     return Vec(W)(m, a, b), codegen

@@ -109,17 +109,27 @@ def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=Non
     form : 'noncanonical' (needs system), 'canonical' (needs p), 'corrected' (needs system, lam, h),
         or a callable ϑ(q) -> (N, d): the coefficients of a one-form of your own
     """
+    return first_invariants(q, [form], system, p, lam, h)[form]
+
+
+def first_invariants(q, forms, system=None, p=None, lam=None, h=None) -> dict:
+    """{form: I₁} for several forms of one loop, sharing q's Fourier coefficients and resolution
+    monitor; each value is bitwise what it is alone."""
     q = _check(q, 2, "loop q")
-    A, Al = one_form_coefficients(q, form, system, p, lam, h)
-    value = spectral.loop_pairing(A, q)                      # in Fourier space (Parseval)
-    fields = [q]
-    if Al is not None:
-        value += spectral.loop_pairing(Al, lam)
-        fields = [np.concatenate([q, h * lam], axis=-1)]     # hλ has the units of q (dq − h dλ)
-    if form == "canonical":
-        fields.append(p)
-    res = max(spectral.loop_tail(f) for f in fields)
-    return InvariantValue(float(value), res, res > UNDER_RESOLVED)
+    qh = spectral.fourier_coefficients(q)
+    tail_q = spectral.loop_tail(q, qh)
+    out = {}
+    for form in forms:
+        A, Al = one_form_coefficients(q, form, system, p, lam, h)
+        value = spectral.loop_pairing(A, q, bh=qh)               # in Fourier space (Parseval)
+        res = tail_q
+        if Al is not None:
+            value += spectral.loop_pairing(Al, lam)
+            res = spectral.loop_tail(np.concatenate([q, h * lam], axis=-1))   # hλ has the units of q
+        if form == "canonical":
+            res = max(res, spectral.loop_tail(p))
+        out[form] = InvariantValue(float(value), res, res > UNDER_RESOLVED)
+    return out
 
 
 def corrected_omega(system, q, lam, h, paper_sign=False):
@@ -212,7 +222,8 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
     named = [f for f in forms if not callable(f)]
     cq0 = spectral.chebyshev_coefficients(q, 0)
     qs, qt = spectral.chebyshev_derivative(q, 0, cq0), spectral.chebyshev_derivative(q, 1)
-    tail_q = spectral.surface_tail(q, cq0)
+    cq2 = np.abs(spectral.chebyshev_coefficients(cq0, 1))
+    tail_q = spectral.coefficient_tail(cq2)
     out, omega = {}, {}
     if "noncanonical" in named or "corrected" in named:
         sy = _need(system, "system", "noncanonical" if "noncanonical" in named else "corrected")
@@ -246,7 +257,8 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
             integrand = omega["noncanonical"]
         else:
             integrand = omega["corrected"]
-            res = spectral.surface_tail(np.concatenate([q, h * lam], axis=-1))   # hλ has the units of q
+            hl2 = np.abs(spectral.chebyshev_coefficients(spectral.chebyshev_coefficients(h * lam, 0), 1))
+            res = spectral.coefficient_tail(np.concatenate([cq2, hl2], axis=-1))   # hλ has the units of q
         out[form] = InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)
     return out
 

@@ -112,10 +112,10 @@ def flops_per_iteration(system, tableau, eng):
 
 def output_vs_step(h=10.0, reps=10):
     """One output of the paper's sets (I₁ of the 2,000-point loop and I₂ of the 100 × 100 surface in
-    all three forms, the surface's forms together as the driver computes them, and the energy,
-    momentum and constraint errors of all 12,000 points) against one GLRK2-symmetric step of the
+    all three forms, each set's forms together as the driver computes them, and the energy,
+    momentum and constraint errors of all 12,000 points, Diagnostics.point_errors) against one GLRK2-symmetric step of the
     same 12,000 points in lanes, one thread."""
-    from invariants.forms import second_invariants
+    from invariants.forms import first_invariants, second_invariants
     gc = integrators.system("guiding_centre_symmetric")
     loop, surf = invariants.loop("guiding_centre", 2000), invariants.surface("guiding_centre", 100, 100)
     pts = np.concatenate([loop, surf.reshape(-1, 4)])
@@ -124,14 +124,15 @@ def output_vs_step(h=10.0, reps=10):
     st = eng.state(pts)
     eng.advance(st, 1, 2)
     q, p, lam = st.q, st.p, st.Lam / h
-    H0, P0 = gc.H(pts), gc.momentum(pts)
+    from types import SimpleNamespace
+    from integrators.service.diagnostics import Diagnostics
+    diag = Diagnostics(SimpleNamespace(diagnostics=("energy", "momentum", "constraint")), gc, pts)
 
     def output():
-        for fm in invariants.FORMS:
-            invariants.first_invariant(q[:2000], fm, system=gc, p=p[:2000], lam=lam[:2000], h=h)
+        first_invariants(q[:2000], list(invariants.FORMS), system=gc, p=p[:2000], lam=lam[:2000], h=h)
         second_invariants(q[2000:].reshape(surf.shape), list(invariants.FORMS), system=gc,
                           p=p[2000:].reshape(surf.shape), lam=lam[2000:].reshape(surf.shape), h=h)
-        np.max(np.abs((gc.H(q) - H0) / H0)), np.max(np.abs(gc.momentum(q) - P0)), np.max(np.abs(p - gc.theta(q)))
+        diag.point_errors(q, p, st.live)
 
     output()
     t = time.perf_counter()

@@ -272,3 +272,8 @@ def test_forms_computed_together_are_bitwise_the_forms_alone_and_match_the_numpy
         assert together[form].value == alone.value and together[form].resolution == alone.resolution, form
     for form in ("noncanonical", "corrected"):
         assert abs(together[form].value - numpy_route[form].value) <= 1e-13 * max(1.0, abs(together[form].value))
+    loop = S[:, 0]
+    ones = invariants.forms.first_invariants(loop, list(invariants.FORMS), system=sy, p=p[:, 0], lam=lam[:, 0], h=h)
+    for form in invariants.FORMS:
+        alone = invariants.first_invariant(loop, form, system=sy, p=p[:, 0], lam=lam[:, 0], h=h)
+        assert ones[form].value == alone.value and ones[form].resolution == alone.resolution, form

@@ -139,7 +139,7 @@ def cmd_run(args) -> int:
               flush=True)
         from ..engine import kernel_cached
         if not kernel_cached():
-            print("compiling the step engine (once per machine, about 40 s on 2 cores; the first pair's wall "
+            print("compiling the step engine (once per machine, about a minute on 2 cores; the first pair's wall "
                   "time below includes it) ...", flush=True)
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))

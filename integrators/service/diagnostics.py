@@ -18,6 +18,9 @@ Two kinds of work:
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+from ..simd import _at
 
 # relative cost of one form per sample point, measured on guiding_centre_symmetric (loop of 2,000,
 # surface of 100 × 100; docs/benchmarks.md): only the ratios matter, for the assignment of tasks
@@ -49,21 +52,25 @@ class Diagnostics:
 
     def __init__(self, scene, system, q0):
         self.scene, self.system = scene, system
-        self.H0 = system.H(q0)
-        self.P0 = system.momentum(q0) if "momentum" in scene.diagnostics else None
+        H0, P0 = _scalars(system, q0)
+        self.H0 = H0
+        self.P0 = P0 if "momentum" in scene.diagnostics else None
 
     def point_errors(self, q, p, live) -> dict:
-        """{'energy_error': …, …}: the largest error over the live points of this block (0 if none)."""
+        """{'energy_error': …, …}: the largest error over the live points of this block (0 if none; NaN
+        if one is NaN).  One compiled pass over the points (the system's generated H, momentum and ϑ)."""
+        from ..engine import point_functions, scalar_function
         sc, sy = self.scene, self.system
-        out = {}
-        with np.errstate(all="ignore"):
-            if "energy" in sc.diagnostics:
-                out["energy_error"] = float(np.max(np.abs((sy.H(q) - self.H0) / self.H0)[live], initial=0.0))
-            if "momentum" in sc.diagnostics:
-                out["momentum_error"] = float(np.max(np.abs(sy.momentum(q) - self.P0)[live], initial=0.0))
-            if "constraint" in sc.diagnostics:
-                out["constraint_error"] = float(np.max(np.abs(p - sy.theta(q))[live], initial=0.0))
-        return out
+        ev, _ = point_functions(sy)
+        d = sy.d
+        out = np.zeros(3)
+        _point_errors(scalar_function(sy), ev, _params(sy), np.ascontiguousarray(q, dtype=float),
+                      np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(live, dtype=np.uint8), self.H0,
+                      self.H0 if self.P0 is None else self.P0, out, np.empty(2), np.empty(d), np.empty(d * d),
+                      np.empty(d * d * d), np.empty(d), np.empty(d * d))
+        names = (("energy", "energy_error", 0), ("momentum", "momentum_error", 1),
+                 ("constraint", "constraint_error", 2))
+        return {key: float(out[i]) for what, key, i in names if what in sc.diagnostics}
 
     def invariant(self, spec, form, q, p, lam, live):
         """(value, resolution, computed) of one form of one set's invariant; points shaped as the set's grid.
@@ -109,16 +116,16 @@ class Diagnostics:
     def set_values(self, spec, forms, q, p, lam, live) -> dict:
         """{(invariant, form): (value, resolution, computed, all live)} of one set's points (its grid's shape).
 
-        A surface's forms are computed together (invariants.forms.second_invariants shares their
-        transforms and point values; each value is bitwise what it is alone), so the tasks one rank
-        holds cost less than the sum of their parts."""
+        A set's forms are computed together (invariants.forms.first_invariants / second_invariants
+        share their transforms and point values; each value is bitwise what it is alone), so the
+        tasks one rank holds cost less than the sum of their parts."""
         import invariants.forms
-        if spec.invariant == "I2" and live.all() and len(forms) > 1:
+        if live.all() and len(forms) > 1:
+            fn = invariants.forms.first_invariants if spec.invariant == "I1" else invariants.forms.second_invariants
             with np.errstate(all="ignore"):
                 try:
-                    got = invariants.forms.second_invariants(q, list(forms), system=self.system, p=p, lam=lam,
-                                                             h=self.scene.h)
-                    return {("I2", f): (got[f].value, got[f].resolution, True, True) for f in forms}
+                    got = fn(q, list(forms), system=self.system, p=p, lam=lam, h=self.scene.h)
+                    return {(spec.invariant, f): (got[f].value, got[f].resolution, True, True) for f in forms}
                 except ValueError:      # a non-finite field: each form on its own says which fail
                     pass
         return {(spec.invariant, form): self.invariant(spec, form, q, p, lam, live) + (bool(live.all()),)
@@ -132,3 +139,44 @@ class Diagnostics:
             values.update(self.set_values(spec, self.scene.forms, q[rows].reshape(shp), p[rows].reshape(shp),
                                           lam[rows].reshape(shp), live[rows]))
         return self.combine(t, [self.point_errors(q, p, live)], values)
+
+
+def _params(system):
+    return np.array([float(v) for v in system.params.values()] or [0.0])
+
+
+def _scalars(system, q):
+    """H and the momentum (0 without a symmetry) at every point, by the system's compiled function."""
+    from ..engine import scalar_function
+    q = np.ascontiguousarray(q, dtype=float)
+    out = np.empty((q.shape[0], 2))
+    _scalars_at(scalar_function(system), _params(system), q, out)
+    return out[:, 0].copy(), out[:, 1].copy()
+
+
+@njit(cache=True, error_model="numpy")
+def _scalars_at(scalars, k, q, out):
+    for i in range(q.shape[0]):
+        scalars(_at(q, i * q.shape[1]), _at(k, 0), _at(out, 2 * i))
+
+
+@njit(cache=True, error_model="numpy")
+def _point_errors(scalars, ev, k, q, p, live, H0, P0, out, hp, th, T, TT, dH, HH):
+    """out = max over live points of |(H − H0)/H0|, |P − P0|, max_i |p_i − ϑ_i(q)| (a NaN wins, as
+    numpy's max lets it)."""
+    n, d = q.shape
+    for j in range(3):
+        out[j] = 0.0
+    for i in range(n):
+        if live[i] == 0:
+            continue
+        scalars(_at(q, i * d), _at(k, 0), _at(hp, 0))
+        ev(_at(q, i * d), _at(k, 0), False, _at(th, 0), _at(T, 0), _at(TT, 0), _at(dH, 0), _at(HH, 0))
+        c = 0.0
+        for m in range(d):
+            v = abs(p[i, m] - th[m])
+            if v != v or v > c:
+                c = v
+        for j, v in ((0, abs((hp[0] - H0[i]) / H0[i])), (1, abs(hp[1] - P0[i])), (2, c)):
+            if out[j] == out[j] and (v != v or v > out[j]):
+                out[j] = v
