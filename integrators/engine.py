@@ -335,6 +335,9 @@ class Tolerances:
     stall_complex : the same for the audit's complex-step derivatives (default 1e-13)
     maxiter : iterations before a step counts as failed (default 40)
     refresh : a fresh Jacobian after an iteration that contracted by less than this (default 0.01)
+    predictor : the next step's stage guess: ``"extrapolate"`` (default) the Lagrange polynomial
+        through the last step's stage values, ``"velocity"`` that polynomial with h·q̇(q_n) as one
+        more node (one evaluation and a d × d solve a step; :func:`predictor`)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/breakdown_sensitivity.py --stopping-rule)
@@ -348,8 +351,11 @@ class Tolerances:
     maxiter: int = 40
     refresh: float = 0.01
     accept_unconverged: bool = False
+    predictor: str = "extrapolate"
 
     def __post_init__(self):
+        if self.predictor not in PREDICTORS:
+            raise ValueError(f"Tolerances.predictor must be one of {', '.join(PREDICTORS)}, got {self.predictor!r}")
         for name in ("tol", "stall", "stall_complex", "refresh"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
@@ -358,9 +364,10 @@ class Tolerances:
             raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
 
     def array(self) -> np.ndarray:
-        """[TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT]: what the kernel reads."""
+        """[TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT, VELOCITY]: what the kernel reads."""
         return np.array([self.tol, self.stall, self.stall_complex, float(self.maxiter), self.refresh,
-                         1.0 if self.accept_unconverged else 0.0], dtype=np.float64)
+                         1.0 if self.accept_unconverged else 0.0, 1.0 if self.predictor == "velocity" else 0.0],
+                        dtype=np.float64)
 
 
 class Engine:
@@ -383,11 +390,11 @@ class Engine:
         self.plan = kernel.Plan(*rec.codes(tableau), lob)
         self.codes = self.plan                  # (the name tests and scripts used before it was a Plan)
         self.nz = (s + (1 if rec.coupled else 0) + (1 if lob else 0)) * d
-        self.tab = kernel.flat_tableau(tableau, _lagrange_matrix(tableau.c - 1.0, tableau.c))
         self.k = np.array([float(v) for v in system.params.values()], dtype=np.float64)
         self.tolerances = tolerances if tolerances is not None else Tolerances()
         if not isinstance(self.tolerances, Tolerances):
             raise ValueError(f"tolerances must be an integrators.engine.Tolerances, got {type(tolerances).__name__}")
+        self.tab = kernel.flat_tableau(tableau, predictor(tableau.c, self.tolerances.predictor))
         self._cfg = self.tolerances.array()
         self._functions = {}
 
@@ -464,6 +471,32 @@ class MapEngine:
             state.have_history[ok] = True
             state.live[bad] = False
             state.breakdown_time[bad] = t0 + (first + j) * h
+
+
+PREDICTORS = ("extrapolate", "velocity")
+
+
+def predictor(c, kind="extrapolate"):
+    """The stage guess E (s × (s + 1)) of the next step: Y_i ≈ Σ_j E_ij Y_j + E_is h·q̇(q_n), Y_j the
+    last step's stage displacements (h times the stage velocities, at nodes c_j − 1).
+
+    ``"extrapolate"``: the Lagrange polynomial through the Y_j, evaluated at c_i (last column zero).
+    ``"velocity"``: the same with h·q̇(q_n) at node 0 (one degree more); a stage at c_j = 1 sits on
+    that node and is left out.
+    """
+    c = np.asarray(c, dtype=np.float64)
+    s = c.size
+    E = np.zeros((s, s + 1))
+    if kind == "extrapolate":
+        E[:, :s] = _lagrange_matrix(c - 1.0, c)
+    elif kind == "velocity":
+        keep = np.flatnonzero(np.abs(c - 1.0) > 1e-12)
+        L = _lagrange_matrix(np.r_[c[keep] - 1.0, 0.0], c)
+        E[:, keep] = L[:, :-1]
+        E[:, s] = L[:, -1]
+    else:
+        raise ValueError(f"unknown predictor {kind!r}")
+    return E
 
 
 def _lagrange_matrix(nodes, targets):

@@ -78,7 +78,8 @@ Coefficients = namedtuple("Coefficients", "a a_lo abar abar_lo b b_lo d E")
 
 def flat_tableau(tableau, E):
     """[a, a_lo, ā, ā_lo, b, b_lo, d, E] as one float64 array (double + correction coefficients, the
-    Lobatto constraint vector d, zero when unused, and the stage-guess extrapolation E)."""
+    Lobatto constraint vector d, zero when unused, and the stage guess E, s × (s + 1): the next
+    stages from the last step's s stage values and h·q̇(q_n), :func:`integrators.engine.predictor`)."""
     s = tableau.s
     parts = (tableau.a, tableau.a_lo, tableau.abar, tableau.abar_lo, tableau.b, tableau.b_lo,
              tableau.d if tableau.d is not None else np.zeros(s), E)
@@ -553,11 +554,11 @@ def _none(f, F):
 
 
 @njit(**_OPTS)
-def _first_guess(ev, k, q, h, Y, where, d, s, w, S, ip, IP):
-    """Stage displacements h·q̇(q_n) at every stage (lanes ``where``), q̇ solving Ω̄ q̇ = ∇H
-    (eq:euler_lagrange_equations); zero where that is not finite."""
+def _velocity(ev, k, q, h, v, where, d, w, S, ip, IP):
+    """h·q̇(q) into v (lanes ``where``), q̇ solving Ω̄ q̇ = ∇H (eq:euler_lagrange_equations); zero
+    where that is not finite."""
     _eval(ev, k, q, False, w, S, START, d)
-    T, dH, PL, v = at(w, S.pT), at(w, S.pdH), at(w, S.PL), at(w, S.vf)
+    T, dH, PL = at(w, S.pT), at(w, S.pdH), at(w, S.PL)
     for i in range(d):
         for j in range(d):
             st(PL, i * d + j, ld(T, j * d + i) - ld(T, i * d + j))
@@ -568,9 +569,18 @@ def _first_guess(ev, k, q, h, Y, where, d, s, w, S, ip, IP):
     good = where
     for i in range(d):
         good = mand(good, np.isfinite(ld(v, i)))
+    for m in range(d):
+        st(v, m, sel(good, h * ld(v, m), 0.0))
+
+
+@njit(**_OPTS)
+def _first_guess(ev, k, q, h, Y, where, d, s, w, S, ip, IP):
+    """Stage displacements h·q̇(q_n) at every stage (lanes ``where``)."""
+    v = at(w, S.vf)
+    _velocity(ev, k, q, h, v, where, d, w, S, ip, IP)
     for i in range(s):
         for m in range(d):
-            st(Y, i * d + m, sel(where, sel(good, h * ld(v, m), 0.0), ld(Y, i * d + m)))
+            st(Y, i * d + m, sel(where, ld(v, m), ld(Y, i * d + m)))
 
 
 @njit(inline='always', **_OPTS)
@@ -706,12 +716,17 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
     live = ld(f, F.live) != 0.0
     fresh = ld(f, F.hist) == 0.0
     c = _coefficients(tb, s)
-    Ys, guess = at(w, S.Y), at(w, S.guess)
+    Ys, guess, v = at(w, S.Y), at(w, S.guess), at(w, S.vf)
+    velocity = cfg[6] != 0.0                    # the predictor: with h·q̇(q_n) as a node at 0
+    if velocity:
+        _velocity(ev, k, at(w, S.q), h, v, mnot(fresh), d, w, S, ip, IP)
     for i in range(s):                          # Lagrange extrapolation of the last step's stages
         for m in range(d):
-            acc = c.E[i * s] * ld(Ys, m)
+            acc = c.E[i * (s + 1)] * ld(Ys, m)
             for j in range(1, s):
-                acc = acc + c.E[i * s + j] * ld(Ys, j * d + m)
+                acc = acc + c.E[i * (s + 1) + j] * ld(Ys, j * d + m)
+            if velocity:
+                acc = acc + c.E[i * (s + 1) + s] * ld(v, m)
             st(guess, i * d + m, acc)
     first = mand(live, fresh)
     if anyl(first):

@@ -231,9 +231,10 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
         if want:
             lam = _check(_need(lam, "lam", "corrected"), 3, "lam")
             h = float(_need(h, "h", "corrected"))
-            ls, lt = spectral.chebyshev_derivative(lam, 0), spectral.chebyshev_derivative(lam, 1)
+            cl0 = spectral.chebyshev_coefficients(lam, 0)
+            ls, lt = spectral.chebyshev_derivative(lam, 0, cl0), spectral.chebyshev_derivative(lam, 1)
         else:
-            ls = lt = None
+            ls = lt = cl0 = None
         got = _compiled_integrands(sy, q, lam, qs, qt, ls, lt, h, paper_sign, want)
         if got is None:                     # a duck-typed system: the numpy route
             Om = sy.Omega(q)
@@ -257,7 +258,7 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
             integrand = omega["noncanonical"]
         else:
             integrand = omega["corrected"]
-            hl2 = np.abs(spectral.chebyshev_coefficients(spectral.chebyshev_coefficients(h * lam, 0), 1))
+            hl2 = np.abs(h * spectral.chebyshev_coefficients(cl0, 1))      # λ's coefficients, scaled
             res = spectral.coefficient_tail(np.concatenate([cq2, hl2], axis=-1))   # hλ has the units of q
         out[form] = InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)
     return out

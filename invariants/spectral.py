@@ -107,7 +107,8 @@ def chebyshev_points(n: int) -> np.ndarray:
 def chebyshev_coefficients(v, axis):
     """Values at ascending Chebyshev points → coefficients of Σ c_j T_j(2x − 1) along ``axis`` (DCT-I)."""
     n = v.shape[axis]
-    c = scipy.fft.dct(np.flip(v, axis=axis), type=1, axis=axis) / (n - 1)
+    c = scipy.fft.dct(np.flip(v, axis=axis), type=1, axis=axis)
+    c /= n - 1
     sl = [slice(None)] * v.ndim
     for end in (0, n - 1):
         sl[axis] = end
@@ -122,7 +123,7 @@ def chebyshev_values(c, axis):
     sl = [slice(None)] * c.ndim
     sl[axis] = slice(1, n - 1)
     c[tuple(sl)] /= 2
-    return np.flip(scipy.fft.dct(c, type=1, axis=axis), axis=axis)
+    return np.flip(scipy.fft.dct(c, type=1, axis=axis, overwrite_x=True), axis=axis)
 
 
 @njit(cache=True, error_model="numpy")

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import integrators
+import invariants
 from integrators import kernel
 from integrators.projections import PROJECTIONS, admission
 
@@ -82,3 +83,31 @@ def test_lanes_must_be_one_or_the_kernels_width():
     eng = integrators.Engine(sy, integrators.tableau("GLRK1"), "none", 0.1)
     with pytest.raises(ValueError, match="lanes must be 1 or"):
         eng.advance(eng.state(np.array([sy.defaults["q0"]])), 1, 1, lanes=3)
+
+
+@pytest.mark.parametrize("tab,proj", [("GLRK2", "symmetric"), ("SRK3", "symmetric"), ("LobIIIA3", "standard"),
+                                      ("GLRK1", "none")])
+def test_the_velocity_predictor_keeps_the_lanes_bits_and_saves_iterations(tab, proj, rng):
+    """Tolerances(predictor="velocity") (the stage guess with h·q̇(q_n) as one more node): W = 8
+    gives W = 1's bits, a stage at c = 1 (SRK3, Lobatto) is left out of the nodes, and on the
+    guiding centre at h = 10 the Gauss pairs need fewer Newton iterations than with extrapolation
+    alone (docs/benchmarks.md measures 0.4–0.6 fewer a step)."""
+    sy = integrators.system("guiding_centre_symmetric")
+    q0 = invariants.loop("guiding_centre", 11) + 1e-3 * rng.standard_normal((11, sy.d))
+    tableau = integrators.tableau(tab)
+    E = integrators.engine.predictor(tableau.c, "velocity")
+    assert np.allclose(E.sum(axis=1), 1.0)                     # it reproduces constants
+    c = np.asarray(tableau.c, dtype=float)
+    assert np.allclose(E[:, :-1] @ (c - 1.0), c)                # and straight lines (node 0 adds 0)
+    vel = integrators.Engine(sy, tableau, proj, 10.0, tolerances=integrators.Tolerances(predictor="velocity"))
+    assert not _same(_run(vel, q0, 12, 1), _run(vel, q0, 12, kernel.LANES))
+    if tab.startswith("GLRK"):
+        ext = integrators.Engine(sy, tableau, proj, 10.0)
+        a, b = _run(ext, q0, 12, kernel.LANES), _run(vel, q0, 12, kernel.LANES)
+        assert b.live.all() and a.live.all()
+        assert b.iterations.sum() < a.iterations.sum() - 0.2 * a.steps.sum()
+
+
+def test_predictor_must_be_known():
+    with pytest.raises(ValueError, match="predictor"):
+        integrators.Tolerances(predictor="taylor")
