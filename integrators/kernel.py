@@ -885,7 +885,7 @@ def probe(ev, k, tab, plan, h, q, p, lam, z, jac):
     Newton solves, for tests (the Jacobian against complex-step differences of the residual)."""
     d = q.shape[0]
     nz = z.shape[0]
-    s = next(c for c in range(1, 9) if 5 * c * c + 3 * c == tab.shape[0])   # the flat tableau: 5 s² + 3 s
+    s = next(c for c in range(1, 9) if 5 * c * c + 4 * c == tab.shape[0])   # the flat tableau: 5 s² + 4 s
     S, F, _ = layout(s, d, nz)
     WS = np.zeros(S.size, z.dtype)
     r = np.zeros(nz, z.dtype)

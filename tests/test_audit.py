@@ -1,4 +1,5 @@
 """The symplecticity audit (integrators.audit, `poincare audit`): verdicts that can fail."""
+import dataclasses
 import json
 from pathlib import Path
 
@@ -197,3 +198,21 @@ def test_cli_audit_errors(args, msg, capsys):
     assert cli.main(args) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err
+
+
+def test_a_scene_that_cannot_tell_methods_apart_says_so(tmp_path, capsys):
+    """The paper's Lotka–Volterra model: even the standard projection is exactly symplectic there
+    (SPEC Part 4), so the audit's report and a comparison run open with a one-line warning; on the
+    point vortices, whose defects show, there is none."""
+    from integrators.service.scene import load_scene
+    lv, pv = load_scene("lotka_volterra"), load_scene("point_vortices")
+    msg = audit.discrimination(lv.system(), lv.points(lv.system()), lv.h)
+    assert msg is not None and "cannot tell" in msg and "GLRK2-standard" in msg
+    assert audit.discrimination(pv.system(), pv.points(pv.system()), pv.h) is None
+    report = audit.audit(audit.candidates_from("GLRK2", ["standard"]), dataclasses.replace(lv, steps=4),
+                         defect_points=1, levels=2, drift=False)
+    assert audit.text_report(report).splitlines()[1].startswith("warning: this scene cannot tell")
+    capsys.readouterr()
+    assert cli.main(["run", "lotka_volterra", "--steps", "20", "-q", "-o", str(tmp_path / "lv.h5")]) in (0, 1)
+    notes = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("note: this scene cannot tell")]
+    assert len(notes) == 2                   # before the run and under its summary

@@ -20,16 +20,15 @@ Two measurements (docs/audit.md has the thresholds and the table for the built-i
 
 * **Invariant drift.**  The candidate advances the loop and surface of a scene; I₁ and I₂ in
   the scene's forms give e(t) = |I(t) − I(0)|/|I(0)|.  Reported: max e, the drift rate (slope
-  of a least-squares line through e(t)) and a verdict:
+  of a least-squares line through e(t)), the growth law of e (invariants.growth: its law, exponent
+  α of e ∝ t^α and the time from which it holds) and a verdict:
 
   - ``broke down``: a sample point failed before the end;
-  - ``round-off``: max e ≤ ``ROUNDOFF``;
   - ``under-resolved``: the set's resolution monitor (invariants.forms) exceeded ``RESOLVED`` at
-    some output, so e may be sampling error: refine the loop or surface;
-  - ``drifting``: the mean of e over the last quarter of the run exceeds ``DRIFT_RATIO`` × the
-    largest e of the first quarter (a linear drift gives 3.5, a bounded oscillation
-    resolved by the run ≤ 1, a √t random walk about 1.9);
-  - ``bounded``: otherwise.
+    some output and max e is above round-off, so e may be sampling error: refine the loop or surface;
+  - otherwise the growth law in the audit's words: ``round-off`` (max e ≤ ``ROUNDOFF``),
+    ``bounded``, ``random walk``, ``drifting`` (linear), ``growing`` (faster than linear), or
+    ``undetermined`` (fewer than 5 outputs).
 
 * **One-step symplecticity defect.**  At sample points x = (q, ϑ(q), λ) the Jacobian DΦ of
   x ↦ Φ(x) gives, per form, the pull-back defect (relative to the size of the terms summed,
@@ -44,15 +43,20 @@ Two measurements (docs/audit.md has the thresholds and the table for the built-i
     read λ_n: the symplectic projection).
 
   for h, h/2, h/4, …; the order p of defect ∝ h^p is fitted over the values above the floor.
+
+* **Whether the scene can tell at all** (:func:`discrimination`): where even maps that are not
+  symplectic in general (the standard projection of GLRK1, GLRK2) keep Ω̄ to the defect floor, the
+  report opens with a one-line warning instead of letting "symplectic" read as a finding.
 """
 from __future__ import annotations
 
 from .candidates import Candidate, candidates_from, load_function, pair_candidate, stepper_map
 from .defect import DEFECT_FLOOR, FD_ORDER8, FD_STEP, READ_THRESHOLD, defect_study, defects, fit_order, jacobian
-from .drift import DRIFT_RATIO, RESOLVED, ROUNDOFF, drift_verdict, run_drift
+from .discrimination import discrimination
+from .drift import RESOLVED, ROUNDOFF, VERDICTS, drift_verdict, run_drift
 from .report import audit, plot_report, text_report
 
 __all__ = ["Candidate", "candidates_from", "load_function", "pair_candidate", "stepper_map", "DEFECT_FLOOR",
            "FD_ORDER8", "FD_STEP", "READ_THRESHOLD", "defect_study", "defects", "fit_order", "jacobian",
-           "DRIFT_RATIO", "RESOLVED", "ROUNDOFF", "drift_verdict", "run_drift", "audit", "plot_report",
+           "VERDICTS", "RESOLVED", "ROUNDOFF", "discrimination", "drift_verdict", "run_drift", "audit", "plot_report",
            "text_report"]

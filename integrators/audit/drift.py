@@ -9,29 +9,31 @@ import numpy as np
 from invariants.forms import UNDER_RESOLVED as RESOLVED   # the one resolution threshold (invariants.forms)
 from .candidates import Candidate, _call
 
-ROUNDOFF = 1e-11        # max relative invariant error still called round-off
-DRIFT_RATIO = 2.0       # last-quarter mean / first-quarter max above which an error drifts
+from invariants.growth import ROUNDOFF, growth_law   # the one classifier of how errors grow
+
+VERDICTS = {"round-off": "round-off", "bounded": "bounded", "random walk": "random walk", "linear": "drifting",
+            "faster": "growing", "undetermined": "undetermined"}   # the growth law's name in the audit
 
 
-def drift_verdict(t, err, broke, resolution=0.0):
+def drift_verdict(t, err, broke, resolution=0.0, law=None):
     """(max error, drift rate, verdict) of one error series e(t); see the module doc.
 
-    resolution : the largest resolution monitor of the sample set over the run; above
-    RESOLVED the error may be sampling error rather than the integrator's.
+    The verdict is the series' growth law (invariants.growth) in the audit's words: ``round-off``,
+    ``bounded``, ``random walk``, ``drifting`` (linear), ``growing`` (faster than linear) or
+    ``undetermined`` (too few outputs), unless a point broke down or the set was under-resolved.
+    resolution : the largest resolution monitor of the sample set over the run; above RESOLVED
+    the error may be sampling error rather than the integrator's.  ``law``: the series'
+    GrowthLaw when already computed.
     """
     t, err = np.asarray(t, float), np.asarray(err, float)
     if broke:
         return float(np.nanmax(err, initial=0.0)) if np.isfinite(err).any() else math.nan, math.nan, "broke down"
     emax = float(np.max(err))
     rate = float(np.polyfit(t - t[0], err, 1)[0]) if t.size > 1 else math.nan
-    if emax <= ROUNDOFF:
-        return emax, rate, "round-off"
-    if resolution > RESOLVED:
+    if resolution > RESOLVED and emax > ROUNDOFF:
         return emax, rate, "under-resolved"
-    k = max(1, (t.size - 1) // 4)
-    first = np.max(err[: k + 1])
-    last = np.mean(err[-k:])
-    return emax, rate, ("drifting" if last > DRIFT_RATIO * first else "bounded")
+    law = growth_law(t, err) if law is None else law
+    return emax, rate, VERDICTS[law.law]
 
 
 def run_drift(cand: Candidate, scene, progress=None):

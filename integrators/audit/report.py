@@ -7,7 +7,10 @@ from pathlib import Path
 import numpy as np
 
 from .defect import DEFECT_FLOOR, defect_study
-from .drift import DRIFT_RATIO, RESOLVED, ROUNDOFF, drift_verdict, run_drift
+from .discrimination import discrimination
+from invariants.growth import BOUNDED_BELOW, FASTER_FROM, LINEAR_FROM, growth_law
+
+from .drift import RESOLVED, ROUNDOFF, drift_verdict, run_drift
 
 
 def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method="auto", progress=None,
@@ -21,9 +24,11 @@ def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method
     sel = np.linspace(0, pts.shape[0], defect_points, endpoint=False).astype(int)
     qd = pts[sel]
     report = {"scene": scene.name, "system": scene.system_name, "h": scene.h, "steps": scene.steps,
-              "T": scene.h * scene.steps, "thresholds": {"roundoff": ROUNDOFF, "drift_ratio": DRIFT_RATIO, "resolved": RESOLVED,
+              "T": scene.h * scene.steps, "thresholds": {"roundoff": ROUNDOFF, "growth_exponents": [BOUNDED_BELOW, LINEAR_FROM, FASTER_FROM],
+                                                         "resolved": RESOLVED,
                                                          "defect_floor": DEFECT_FLOOR},
-              "defect_points": qd.tolist(), "candidates": []}
+              "defect_points": qd.tolist(), "candidates": [],
+              "discrimination": discrimination(system, pts, scene.h)}
     for cand, role in [(c, "candidate") for c in candidates] + [(c, "reference") for c in references]:
         entry = {"name": cand.name, "role": role, "kind": cand.kind, "breakdown_step": None, "drift": {},
                  "t": [], "errors": {}, "defect": {}, "jacobian": None}
@@ -33,8 +38,11 @@ def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method
             t, series, broke, resolution = run_drift(cand, scene)
             for key, err in series.items():
                 res = resolution.get(key.split("/")[0], 0.0)
-                emax, rate, verdict = drift_verdict(t, err, broke is not None, res)
-                entry["drift"][key] = {"max_error": emax, "drift_rate": rate, "verdict": verdict, "resolution": res}
+                g = growth_law(t, err)
+                emax, rate, verdict = drift_verdict(t, err, broke is not None, res, law=g)
+                entry["drift"][key] = {"max_error": emax, "drift_rate": rate, "verdict": verdict, "resolution": res,
+                                       "growth_law": g.law, "growth_exponent": g.exponent,
+                                       "growth_exponent_error": g.exponent_error, "growth_onset": g.onset}
             entry.update(breakdown_step=broke, t=t.tolist(), errors={k: v.tolist() for k, v in series.items()})
         if defect:
             if progress:
@@ -64,17 +72,22 @@ def text_report(report) -> str:
     """The human-readable report."""
     lines = [f"Symplecticity audit on scene '{report['scene']}' ({report['system']}, h = {report['h']:g}, "
              f"{report['steps']} steps, T = {report['T']:g})",
-             f"thresholds: round-off ≤ {ROUNDOFF:g}; drifting when last-quarter mean > {DRIFT_RATIO:g} × "
-             f"first-quarter max; defect floor {DEFECT_FLOOR['complex step']:g} (complex step), "
+             f"thresholds: round-off ≤ {ROUNDOFF:g}; growth e ∝ t^α of the window maxima (invariants.growth): "
+             f"bounded α < {BOUNDED_BELOW:g}, random walk < {LINEAR_FROM:g}, drifting ≤ {FASTER_FROM:g}, growing above; "
+             f"defect floor {DEFECT_FLOOR['complex step']:g} (complex step), "
              f"{DEFECT_FLOOR['central differences']:g} (central differences)", "",
              "Invariant drift: max |I(t) − I(0)|/|I(0)|, drift rate [1/time], resolution monitor, verdict"]
+    if report.get("discrimination"):
+        lines[1:1] = [f"warning: {report['discrimination']}"]
     for c in report["candidates"]:
         head = f"  {c['name']} ({c['role']})" + (f" — a point broke down at step {c['breakdown_step']}"
                                                   if c["breakdown_step"] else "")
         lines.append(head)
         for key, r in c["drift"].items():
+            alpha = r.get("growth_exponent")
+            grow = f" (α = {alpha:.2f})" if alpha is not None and math.isfinite(alpha) else ""
             lines.append(f"    {key:18s} {_fmt(r['max_error']):>9s} {_fmt(r['drift_rate'], '+.1e'):>9s} "
-                         f"{_fmt(r['resolution']):>9s}  {r['verdict']}")
+                         f"{_fmt(r['resolution']):>9s}  {r['verdict']}{grow}")
     lines += ["", "One-step symplecticity defect (relative) for h, h/2, …, fitted order in h, verdict"]
     for c in report["candidates"]:
         lines.append(f"  {c['name']} ({c['role']}, Jacobian by {c['jacobian']})")

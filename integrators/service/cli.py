@@ -74,8 +74,10 @@ def _printable(text) -> str:
 
 def _print_summary(summaries, out):
     keys = sorted({k for s in summaries for k in s.max_errors})
-    head = f"{'pair':22s} {'status':14s} {'broke':>5s} " + " ".join(f"{k:>17s}" for k in keys) + f" {'wall [s]':>9s}"
-    print(f"\nwrote {_printable(out)}\nmax relative invariant error |I(t) − I(0)|/|I(0)| over the outputs where the set was resolved:")
+    W = 24
+    head = f"{'pair':22s} {'status':14s} {'broke':>5s} " + " ".join(f"{k:>{W}s}" for k in keys) + f" {'wall [s]':>9s}"
+    print(f"\nwrote {_printable(out)}\nmax relative invariant error |I(t) − I(0)|/|I(0)| over the outputs where the set was "
+          "resolved, and how it grows (invariants.growth):")
     print(head)
     notes = []
     for s in summaries:
@@ -83,13 +85,14 @@ def _print_summary(summaries, out):
         for k in keys:
             v = s.max_errors.get(k, np.nan)
             if s.status == "failed":
-                cells.append(f"{'failed':>17s}")
+                cell = "failed"
             elif not np.isfinite(v):
-                cells.append(f"{'—':>17s}")
+                cell = "—"
             else:
-                cells.append(f"{v:17.3e}" + ("" if k.split()[0] not in s.unresolved_from else "*"))
-        errs = " ".join(c if len(c) == 17 else c[1:] for c in cells)
-        print(f"{_printable(s.pair):22s} {s.status:14s} {s.breakdowns:5d} {errs} {s.wall_time:9.1f}")
+                law = s.laws.get(k, "")
+                cell = f"{v:.3e}" + ("*" if k.split()[0] in s.unresolved_from else "") + (f" {law}" if law else "")
+            cells.append(f"{cell:>{W}s}")
+        print(f"{_printable(s.pair):22s} {s.status:14s} {s.breakdowns:5d} {' '.join(cells)} {s.wall_time:9.1f}")
         if s.status == "partial":
             first, total = s.breakdown
             notes.append(f"  {_printable(s.pair)}: {s.breakdowns} of {total} points broke down (the first at t = "
@@ -141,12 +144,21 @@ def cmd_run(args) -> int:
         if not kernel_cached():
             print("compiling the step engine (once per machine, about a minute on 2 cores; the first pair's wall "
                   "time below includes it) ...", flush=True)
+    note = None
+    if comm.rank == 0 and len(scene.projections) > 1:      # the scene compares projections: can it?
+        from ..audit.discrimination import discrimination
+        system = scene.system()
+        note = discrimination(system, scene.points(system), scene.h)
+        if note:
+            print(f"note: {note}", flush=True)
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
                     progress=False if args.quiet else None, version=__version__, threads=threads)
     if comm.rank == 0:
         code = _print_summary(summaries, out)
+        if note:
+            print(f"note: {note}")
         _print_user_code()
         return code
     return EXIT_OK

@@ -47,6 +47,7 @@ class PairSummary:
     timings: dict = dataclasses.field(default_factory=dict)
     unresolved_from: dict = dataclasses.field(default_factory=dict)   # {'I1': first t the set was under-resolved}
     breakdown: tuple = (None, 0)     # (first breakdown time or None, points of the run)
+    laws: dict = dataclasses.field(default_factory=dict)   # {'I1 form' | 'energy' | …: growth law}
 
 
 class Progress:
@@ -656,6 +657,7 @@ class _Stream:
 
 def finalize(path, scene):
     """Each pair's status and wall_time attributes, written, and the summaries."""
-    return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown)
-            for name, status, broke, errs, wall, unresolved, breakdown in
+    return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown,
+                        laws={k: v.law for k, v in laws.items()})
+            for name, status, broke, errs, wall, unresolved, breakdown, laws in
             output.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]

@@ -413,6 +413,38 @@ def pair_summary(g, n_outputs, threshold):
     return status, broke, errs, unresolved_from
 
 
+def growth_laws(g, threshold):
+    """{'I1 form' | 'I2 form' | 'energy' | …: GrowthLaw} of a pair's series (invariants.growth): each
+    invariant's relative error over the outputs where its set was resolved and no point had broken
+    down (the law of that prefix), each diagnostic's error as stored."""
+    from invariants.growth import growth_law
+    t = _read(g, "t")
+    laws = {}
+    for inv in ("I1", "I2"):
+        if inv not in g:
+            continue
+        ok = _read(g, f"resolution/{inv}") <= threshold
+        for form in g[inv]:
+            e = relative_error(_read(g, f"{inv}/{form}"))
+            laws[f"{inv} {form}"] = growth_law(t, np.where(ok, e, np.nan))
+    for key in g:
+        if key.endswith("_error"):
+            laws[key[:-len("_error")]] = growth_law(t, _read(g, key))
+    return laws
+
+
+def write_laws(g, laws):
+    """Each series dataset's attributes growth_law, growth_exponent (± growth_exponent_error) and
+    growth_onset (the time from which the law holds)."""
+    for key, law in laws.items():
+        ds = g["/".join(key.split(" ")) if key.startswith("I") else f"{key}_error"]
+        ds.attrs["growth_law"] = law.law
+        ds.attrs["growth_exponent"] = law.exponent
+        ds.attrs["growth_exponent_error"] = law.exponent_error
+        ds.attrs["growth_onset"] = law.onset
+        ds.attrs["growth_log_prefactor"] = law.log_prefactor    # log C of the fitted C·t^α (plots)
+
+
 def set_status(g, status, unresolved_from):
     g.attrs["status"] = status
     for inv in ("I1", "I2"):
@@ -493,6 +525,7 @@ def close_pair(g, n_outputs, threshold):
     status, _, _, unresolved = pair_summary(g, n_outputs, threshold)
     set_status(g, status, unresolved)
     if status in FINISHED:
+        write_laws(g, growth_laws(g, threshold))
         settle_checkpoint(g)
 
 
@@ -519,8 +552,9 @@ def settle_checkpoint(g):
 
 
 def finish(path, names, n_outputs) -> list:
-    """Write each pair's final status and wall_time; [(name, status, breakdowns, errors, wall time,
-    unresolved, (first breakdown time or None, points))] as :func:`pair_summary` gives them."""
+    """Write each pair's final status, wall_time and growth laws; [(name, status, breakdowns, errors,
+    wall time, unresolved, (first breakdown time or None, points), laws)] as :func:`pair_summary` and
+    :func:`growth_laws` give them."""
     out = []
     with h5py.File(path, "r+") as f:
         threshold = float(f.attrs.get("resolution_threshold", np.inf))
@@ -528,11 +562,14 @@ def finish(path, names, n_outputs) -> list:
             g = f["runs"][name]
             status, broke, errs, unresolved = pair_summary(g, n_outputs, threshold)
             set_status(g, status, unresolved)
+            laws = growth_laws(g, threshold)
+            if status in FINISHED:
+                write_laws(g, laws)
             wall = float(g["wall_clock"][0])
             g.attrs["wall_time"] = wall
             bt = g["breakdown_time"][...]
             first = float(bt[np.isfinite(bt)].min()) if broke else None
-            out.append((name, status, broke, errs, wall, unresolved, (first, int(bt.size))))
+            out.append((name, status, broke, errs, wall, unresolved, (first, int(bt.size)), laws))
     return out
 
 
@@ -545,7 +582,9 @@ class PairRun:
     ``errors`` : {'energy'|'momentum'|'constraint': (n,)} max over live points; ``breakdown_time`` :
     (npoints,) inf where a point never broke down; ``points`` : {'loop'|'surface': array} when the scene
     stored them; ``status``, ``wall_time``; ``under_resolved_from`` : {'I1'|'I2': first t} of a set
-    that was under-resolved.
+    that was under-resolved; ``growth`` : {'I1 form'|'I2 form'|'energy'|…: (law, exponent, its error,
+    onset, log prefactor)} of a finished pair (invariants.growth: the fitted law C·t^α holds from the
+    onset; the datasets' growth_* attributes).
     """
 
     name: str
@@ -560,6 +599,7 @@ class PairRun:
     breakdown_time: np.ndarray
     points: dict
     under_resolved_from: dict = dataclasses.field(default_factory=dict)
+    growth: dict = dataclasses.field(default_factory=dict)
 
     def __repr__(self):
         t = f"t = {self.t[0]:g} … {self.t[-1]:g}" if self.t.size else "no outputs"
@@ -628,6 +668,18 @@ def _read(g, name, limit=None):
                           f"({plain_error(exc)})") from None
 
 
+def _growth_attrs(g):
+    out = {}
+    for key in [f"{inv}/{form}" for inv in ("I1", "I2") if inv in g for form in g[inv]] + \
+            [k for k in g if k.endswith("_error")]:
+        a = g[key].attrs
+        if "growth_law" in a:
+            name = key.replace("/", " ") if key.startswith("I") else key[:-len("_error")]
+            out[name] = (str(a["growth_law"]), float(a["growth_exponent"]), float(a["growth_exponent_error"]),
+                         float(a["growth_onset"]), float(a.get("growth_log_prefactor", np.nan)))
+    return out
+
+
 def read_run(path) -> Run:
     """Read a ``poincare run`` file into arrays (the layout above; h5py underneath).
 
@@ -651,7 +703,8 @@ def read_run(path) -> Run:
                     errors={k[:-len("_error")]: _read(g, k, limit) for k in g if k.endswith("_error")},
                     breakdown_time=_read(g, "breakdown_time", limit), points=sets("points"),
                     under_resolved_from={k.split("/")[1]: float(v) for k, v in g.attrs.items()
-                                         if k.startswith("under_resolved_from/")})
+                                         if k.startswith("under_resolved_from/")},
+                    growth=_growth_attrs(g))
             return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
                        scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
     except (DamagedFile, BusyFile, FileNotFoundError):

@@ -54,6 +54,7 @@ def _grid(run, inv, form, out):
             values = None if pr is None else (pr.I1 if inv == "I1" else pr.I2).get(form)
             if values is not None:
                 ax.semilogy(pr.t, np.maximum(relative_error(values), FLOOR), lw=0.9)
+                _law_line(ax, pr, f"{inv} {form}")
                 broke = ~np.isfinite(values)        # red from the set's first broken point on (no invariant)
                 for a, b in _stretches(pr.t, broke):
                     ax.axvspan(a, b, color="C3", alpha=0.18, lw=0, label="broken down")
@@ -77,11 +78,24 @@ def _grid(run, inv, form, out):
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylim(FLOOR / 2, None)
     fig.suptitle(f"{'first' if inv == 'I1' else 'second'} Poincaré invariant {inv}, {form} form: "
-                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|" + _caption(shaded, shaded_broke),
+                 f"|{inv}(t) − {inv}(0)| / |{inv}(0)|\n(dashed: the fitted growth law C·t^α of its window "
+                 "maxima, from where it holds)" + _caption(shaded, shaded_broke),
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
+
+
+def _law_line(ax, pr, key, colour="k"):
+    """The fitted growth law C·t^α from its onset (dashed) and its name, where the file has one."""
+    if key not in pr.growth:
+        return
+    law, alpha, err, onset, logc = pr.growth[key]
+    t = pr.t[(pr.t >= onset) & (pr.t > 0)]
+    if t.size > 1 and np.isfinite(logc) and np.isfinite(alpha):
+        ax.semilogy(t, np.maximum(np.exp(logc + alpha * np.log(t)), FLOOR), "--", color=colour, lw=0.7)
+    label = law if not np.isfinite(alpha) else f"{law}, α = {alpha:.2f}"
+    ax.text(0.98, 0.04, label, transform=ax.transAxes, fontsize=6.5, ha="right", color="0.25")
 
 
 def _caption(under, broke):
