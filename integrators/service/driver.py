@@ -51,28 +51,38 @@ class PairSummary:
 
 
 class Progress:
-    """A one-line progress bar with ETA on stderr (rank 0 only; silent when not a terminal unless forced)."""
+    """The run's progress bar (tqdm.auto: a text bar in a terminal, a widget in a notebook), on rank 0
+    only, over the steps of every pair still to run.  ``enabled`` False (``-q``, or not interactive)
+    counts without drawing."""
 
     def __init__(self, total, enabled):
         self.total, self.done, self.enabled = total, 0, enabled
-        self.start = time.perf_counter()
-        self.last = 0.0
+        self.bar = None
+        if enabled:
+            import shutil
+            from tqdm.auto import tqdm
+            ncols = None if "ipykernel" in sys.modules else min(shutil.get_terminal_size().columns, 120)
+            self.bar = tqdm(total=total, unit="step", unit_scale=True, leave=True, ncols=ncols,
+                            mininterval=0.2, smoothing=0.1)   # (a terminal that reports no width: 80)
 
     def update(self, n, label):
         self.done += n
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if now - self.last < 0.2 and self.done < self.total:
-            return
-        self.last = now
-        frac = self.done / self.total
-        eta = (now - self.start) * (1 - frac) / frac if frac > 0 else float("nan")
-        bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f}%  {label:<22s} ETA {eta:6.0f} s ")
-        if self.done >= self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        if self.bar is not None:
+            if self.bar.desc != label:
+                self.bar.set_description_str(label, refresh=False)
+            self.bar.update(n)
+            if self.done >= self.total:
+                self.close()
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _interactive():
+    """Whether a bar is wanted by default: stderr is a terminal, or this is a notebook kernel."""
+    return sys.stderr.isatty() or "ipykernel" in sys.modules
 
 
 def _concat(parts):
@@ -209,7 +219,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
 
     timings = {}
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
-    bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or sys.stderr.isatty())))
+    bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or _interactive())))
     try:
         stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED)
         if replacing is not None:      # the old file goes once the new run has written its first rows
@@ -243,6 +253,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         if replacing is not None:
             replacing.abandon()
         raise
+    finally:
+        bar.close()
     if rank != 0:
         return None
     f.close()

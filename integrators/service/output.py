@@ -612,6 +612,49 @@ class PairRun:
         """|I(t) − I(0)| / |I(0)| of one invariant and form (:func:`relative_error`)."""
         return relative_error((self.I1 if inv == "I1" else self.I2)[form])
 
+    def to_xarray(self, forms=None):
+        """The pair as an ``xarray.Dataset`` over time ``t`` (and ``form``, ``point``): ``I1``, ``I2``
+        (t, form); ``resolution_I1``, ``resolved_I1``, … (t); the diagnostics' ``energy_error``, …
+        (t), each with its growth law in ``.attrs``; ``I1_growth_law``, ``I1_growth_exponent``, …
+        (form); ``breakdown_time`` (point).  Attributes: pair, status, wall_time, under-resolved
+        times.  ``ds.I2.sel(form="corrected").plot()`` draws a series."""
+        import xarray as xr
+        from invariants import FORMS
+        forms = list(forms) if forms is not None else \
+            [f for f in FORMS if f in self.I1 or f in self.I2] + \
+            sorted({f for d in (self.I1, self.I2) for f in d} - set(FORMS))
+        n = self.t.shape[0]
+        data = {}
+        for inv in ("I1", "I2"):
+            d = getattr(self, inv)
+            if not d:
+                continue
+            data[inv] = (("t", "form"), np.stack([np.asarray(d[f], float) if f in d else np.full(n, np.nan)
+                                                  for f in forms], axis=1) if forms else np.zeros((n, 0)),
+                         {"long_name": f"{inv} ({'loop' if inv == 'I1' else 'surface'})"})
+            g = [self.growth.get(f"{inv} {f}") for f in forms]
+            data[f"{inv}_growth_law"] = ("form", np.array([x[0] if x else "" for x in g], dtype=object))
+            data[f"{inv}_growth_exponent"] = ("form", np.array([x[1] if x else np.nan for x in g]))
+            data[f"{inv}_growth_onset"] = ("form", np.array([x[3] if x else np.nan for x in g]))
+            if inv in self.resolution:
+                data[f"resolution_{inv}"] = ("t", np.asarray(self.resolution[inv], float))
+            if inv in self.resolved:
+                data[f"resolved_{inv}"] = ("t", np.asarray(self.resolved[inv]))
+        for key, v in self.errors.items():
+            attrs = {}
+            if key in self.growth:
+                law, a, da, onset, _ = self.growth[key]
+                attrs = {"growth_law": law, "growth_exponent": a, "growth_exponent_error": da, "growth_onset": onset}
+            data[f"{key}_error"] = ("t", np.asarray(v, float), attrs)
+        data["breakdown_time"] = ("point", np.asarray(self.breakdown_time, float))
+        attrs = {"pair": self.name, "status": self.status, "wall_time": self.wall_time}
+        attrs.update({f"under_resolved_from_{k}": v for k, v in self.under_resolved_from.items()})
+        return xr.Dataset(data, coords={"t": ("t", np.asarray(self.t, float)), "form": ("form", forms)},
+                          attrs=attrs)
+
+    def _repr_html_(self):
+        return _html_table([self])
+
 
 @dataclasses.dataclass
 class Run:
@@ -636,6 +679,34 @@ class Run:
                 f"({', '.join(f'{v} {k}' for k, v in counts.items())}), {self.steps} steps; "
                 "run.pairs by name, run[name] one pair>")
 
+    def to_xarray(self):
+        """Every pair as one ``xarray.Dataset`` with a ``pair`` dimension (see
+        :meth:`PairRun.to_xarray`; a pair still pending is NaN past its last output), plus
+        ``status`` and ``wall_time`` per pair: ``ds.I2.sel(pair="GLRK2-symmetric", form="corrected")``."""
+        import xarray as xr
+        from invariants import FORMS
+        forms = [f for f in FORMS if any(f in p.I1 or f in p.I2 for p in self.pairs.values())]
+        forms += sorted({f for p in self.pairs.values() for d in (p.I1, p.I2) for f in d} - set(forms))
+        tabs, projs = self.grid()
+        order = [pair_name(t, q) for t in tabs for q in projs]
+        names = [n for n in order if n in self.pairs] + [n for n in self.pairs if n not in order]
+        parts = []
+        for name, p in ((n, self.pairs[n]) for n in names):
+            ds = p.to_xarray(forms)
+            parts.append(ds.assign(status=((), p.status), wall_time=((), p.wall_time)).expand_dims(pair=[name]))
+        if not parts:
+            return xr.Dataset(attrs={"path": self.path, "system": self.system, "steps": self.steps})
+        ds = xr.concat(parts, dim="pair", join="outer", combine_attrs="drop_conflicts", data_vars="all",
+                       coords="different", compat="equals")
+        ds.attrs.update(path=self.path, system=self.system, steps=self.steps, format=self.format)
+        for key in ("pair", "status", "wall_time"):
+            ds.attrs.pop(key, None)
+        return ds
+
+    def _repr_html_(self):
+        return (f"<p><b>poincare run</b> <code>{_esc(self.path)}</code>: {_esc(self.system)}, {self.steps} steps, "
+                f"{len(self.pairs)} pairs</p>" + _html_table(list(self.pairs.values())))
+
     def grid(self) -> tuple:
         """(tableaus, projections) in the scene's order (HDF5 lists the groups alphabetically); a
         user's step maps come last, under the projection 'map'."""
@@ -651,6 +722,40 @@ class Run:
                 tabs += [t] if t not in tabs else []
                 projs += [p] if p not in projs else []
             return tabs, projs
+
+
+def _esc(text):
+    import html
+    return html.escape(str(text))
+
+
+def _html_table(pairs):
+    """An HTML table of pairs: status, points broken down, and each series' largest error and law."""
+    keys = []
+    for p in pairs:
+        for k in [f"{inv} {f}" for inv in ("I1", "I2") for f in getattr(p, inv)] + list(p.errors):
+            if k not in keys:
+                keys.append(k)
+    head = "".join(f"<th>{_esc(k)}</th>" for k in keys)
+    rows = []
+    for p in pairs:
+        cells = []
+        for k in keys:
+            if k.startswith("I"):
+                inv, form = k.split(" ", 1)
+                v = getattr(p, inv).get(form)
+                e = relative_error(v) if v is not None and len(v) else None
+            else:
+                e = p.errors.get(k)
+            big = float(np.nanmax(e)) if e is not None and len(e) and np.isfinite(e).any() else None
+            law = p.growth.get(k, ("",))[0]
+            cells.append(f"<td>{'—' if big is None else f'{big:.2e}'}<br><small>{_esc(law)}</small></td>")
+        broke = int(np.isfinite(p.breakdown_time).sum())
+        rows.append(f"<tr><td><b>{_esc(p.name)}</b></td><td>{_esc(p.status)}</td><td>{broke}</td>"
+                    + "".join(cells) + "</tr>")
+    return ("<table><tr><th>pair</th><th>status</th><th>broke</th>" + head + "</tr>" + "".join(rows) + "</table>"
+            "<p><small>largest |I(t) − I(0)|/|I(0)| (all outputs) and diagnostic errors, with their growth laws"
+            "</small></p>")
 
 
 def _read(g, name, limit=None):

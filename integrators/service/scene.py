@@ -252,6 +252,7 @@ _SCHEMA = {
             "forms": list, "diagnostics": list, "store_points": bool},
     "output": {"path": str, "checkpoint_seconds": float},
 }
+RUN_KEYS = tuple(_SCHEMA["run"])      # what integrators.service.run(..., **overrides) may set
 
 
 def _check_table(data, section):
