@@ -478,23 +478,6 @@ def test_the_audit_doc_counts_the_builtin_tableaus():
     assert f"all {len(integrators.TABLEAU_NAMES)} built-in tableaus" in doc
 
 
-def test_the_readme_and_systems_doc_snippets_define_what_they_use(tmp_path):
-    """The README's Python blocks after the first (which reads the default run's file) and
-    docs/systems.md's block, run in order in one folder with the README's TOML files."""
-    import re
-    root = Path(__file__).parents[1]
-    readme = (root / "README.md").read_text()
-    for name, body in re.findall(r"```toml\n# (\S+)\n(.*?)```", readme, re.S):
-        (tmp_path / name).write_text(body)
-    assert poincare("run", "anharmonic.toml", "-q", cwd=tmp_path).returncode == 0
-    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)[1:]
-    blocks += re.findall(r"```python\n(.*?)```", (root / "docs" / "systems.md").read_text(), re.S)
-    assert len(blocks) >= 3
-    for code in blocks:
-        r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600)
-        assert r.returncode == 0, r.stderr[-2000:]
-
-
 def test_an_expression_not_finite_at_the_sample_points_is_refused():
     with pytest.raises(SceneError, match=r"^loop: system.H is not finite at point 0 = \[0.55, 0.5\]"):
         parse_scene(USER.replace('H = "x^2 + y^2"', 'H = "sqrt(x - 10) + y^2"'))
