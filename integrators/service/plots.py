@@ -112,12 +112,14 @@ def _diagnostics(run, out):
     for ax, d in zip(axes[0], diags):
         for k, (name, pr) in enumerate(run.pairs.items()):
             if d in pr.errors and pr.errors[d].shape[0]:
-                ax.semilogy(pr.t, np.maximum(pr.errors[d], FLOOR), lw=0.8, label=name,
+                law = pr.growth.get(d, ("",))[0]
+                ax.semilogy(pr.t, np.maximum(pr.errors[d], FLOOR), lw=0.8, label=f"{name}: {law}" if law else name,
                             ls=("-", "--", ":", "-.")[k // 10 % 4])
         ax.set_title(f"{d} error" + (" (relative)" if d == "energy" else ""), fontsize=10)
         ax.set_xlabel("t")
         ax.grid(True, lw=0.3)
-    axes[0, -1].legend(fontsize=6, ncol=2, loc="lower right")
+    for ax in axes[0]:                      # each panel's own legend: the pairs with that error's growth law
+        ax.legend(fontsize=5.5, ncol=2, loc="lower right")
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
