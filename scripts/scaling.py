@@ -200,9 +200,14 @@ def lpt(costs, ranks):
 PART_BYTES = 3 * 8 * 4 + 1      # a sample point's q, p, λ (d = 4) and live flag, as the sets are gathered
 
 
-def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup, checkpoints=False):
+def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup, checkpoints=False, rotate=False):
     """Predicted wall [s] of the scene on ``ranks`` ranks × 1 thread (with ``checkpoints``, also the
-    seconds of it that the checkpoints take: the state sent to rank 0 and written there)."""
+    seconds of it that the checkpoints take: the state sent to rank 0 and written there).
+
+    ``rotate``: the task owners turn by one rank a batch (driver._Stream.owners), so over R batches
+    every rank runs every task once and receives every set's parts once: an interval costs
+    max((N·k·c + Σ_r W_r)/R, rank 0's row write) + Σ_sets G/R, the largest task no longer a floor
+    (it must only fit in the R intervals of its turn, which Σ W/R ≥ max W guarantees)."""
     fits, diag, bw, row_write, ck_write, ck_bytes = (
         model[k] for k in ("fits", "diag", "bw", "row_write", "ck_write_per_byte", "ck_bytes_per_point"))
     n = n_loop + n_surf
@@ -219,8 +224,12 @@ def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup
     ck = ck_bytes * n * ((ranks - 1) / ranks / bw + ck_write)    # one checkpoint: to rank 0, then written
     outputs = steps // every
     total, ck_total = startup, 0.0
+    G_all = (n_loop + n_surf) * PART_BYTES * (ranks - 1) / ranks / bw      # every set's parts, once
     for c in pair_costs:
-        interval = max((n * every * c + W.sum()) / ranks, W.max()) + G
+        if rotate:
+            interval = max((n * every * c + W.sum()) / ranks, row_write) + G_all / ranks
+        else:
+            interval = max((n * every * c + W.sum()) / ranks, W.max()) + G
         pair = outputs * interval + W.max() + G          # the outputs, plus the one at t = 0
         ck_total += (1 + int(pair // 60.0)) * ck
         total += pair + (1 + int(pair // 60.0)) * ck
@@ -258,7 +267,11 @@ def predict(args):
     # the paper scene at 1,000 steps, and at 10^6 points (loop 166,000, surface 913 x 913)
     big = dict(n_loop=166_000, n_surf=913 * 913)
     lines = ["| ranks | paper scene, 12,000 points: wall [s] | speed-up | 10⁶ points: wall [s] | speed-up | "
-             "largest task share at 10⁶ | checkpoints' share at 10⁶ |", "|---:|---:|---:|---:|---:|---:|---:|"]
+             "largest task share at 10⁶ | checkpoints' share at 10⁶ | rotating owners: paper scene speed-up "
+             "(efficiency) | rotating owners: 10⁶ points speed-up (efficiency) | rotating: checkpoints' share at 10⁶ |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    base_rs = predict_wall(model, 1, 2000, 10000, 1000, every, pair_costs, startup, rotate=True)
+    base_rb = predict_wall(model, 1, 166_000, 913 * 913, 1000, every, pair_costs, startup, rotate=True)
     base_s = predict_wall(model, 1, 2000, 10000, 1000, every, pair_costs, startup)
     base_b = predict_wall(model, 1, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup)
     curve = []
@@ -268,9 +281,13 @@ def predict(args):
         ws = predict_wall(model, r, 2000, 10000, 1000, every, pair_costs, startup)
         wb, ck = predict_wall(model, r, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup, True)
         share = biggest * (1000 // every + 1) * len(pair_costs) / wb
-        curve.append((r, ws, wb))
+        rs_ = predict_wall(model, r, 2000, 10000, 1000, every, pair_costs, startup, rotate=True)
+        rb_, rck = predict_wall(model, r, big["n_loop"], big["n_surf"], 1000, every, pair_costs, startup, True,
+                                rotate=True)
+        curve.append((r, ws, wb, rs_, rb_))
         lines.append(f"| {r} | {ws:,.0f} | {base_s / ws:.1f} | {wb:,.0f} | {base_b / wb:.1f} | {100 * share:.0f} % "
-                     f"| {100 * ck / wb:.1f} % |")
+                     f"| {100 * ck / wb:.1f} % | {base_rs / rs_:.1f} ({100 * base_rs / rs_ / r:.0f} %) "
+                     f"| {base_rb / rb_:.1f} ({100 * base_rb / rb_ / r:.0f} %) | {100 * rck / rb_:.1f} % |")
     print("\n".join(lines))
     import matplotlib
     matplotlib.use("Agg")
@@ -279,6 +296,8 @@ def predict(args):
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.loglog(rs, curve[0][1] / np.array([c[1] for c in curve]), "o-", label="paper scene (12,000 points)")
     ax.loglog(rs, curve[0][2] / np.array([c[2] for c in curve]), "s-", label="10⁶ points")
+    ax.loglog(rs, curve[0][3] / np.array([c[3] for c in curve]), "o--", label="paper scene, rotating task owners")
+    ax.loglog(rs, curve[0][4] / np.array([c[4] for c in curve]), "s--", label="10⁶ points, rotating task owners")
     ax.loglog(rs, rs, "k:", lw=0.8, label="ideal")
     ax.plot([1, 2], [1, res["1x1"]["wall"] / res["2x1"]["wall"]], "r*", ms=10,
             label="measured (paper scene, this file's 1x1 and 2x1)")

@@ -387,3 +387,24 @@ def test_invariant_tasks_are_spread_over_the_ranks():
         assert np.count_nonzero(load) == min(size, 6)
         best_possible = max(load.sum() / size, max(COST_PER_POINT[k] * counts[k[0]] for k in a))
         assert load.max() <= 4 / 3 * best_possible
+
+
+def test_task_owners_rotate_over_the_batches():
+    """Batch j's owners are the assignment turned by j ranks: each batch's loads are the assignment's
+    (the same multiset), and over any R consecutive batches every rank runs every task once, so the
+    largest task is no rank's every batch (issue: MPI without the ceiling)."""
+    from types import SimpleNamespace
+    from integrators.service.diagnostics import assign
+    scene = parse_scene(SMALL)
+    for size in (1, 2, 3, 5, 8, 16):
+        st = driver._Stream(SimpleNamespace(size=size, rank=0), scene, None, None, {}, 1e-10)
+        base = assign(scene, size)
+        for j0 in (0, 7):
+            for key in base:
+                assert sorted(st.owners(j0 + j)[key] for j in range(size)) == list(range(size))
+        for j in range(3):
+            own = st.owners(j)
+            assert sorted(own) == sorted(base)
+            assert sorted(np.bincount(list(own.values()), minlength=size)) == \
+                sorted(np.bincount(list(base.values()), minlength=size))
+            assert set(st.needs(j)) == set(own.values())

@@ -447,6 +447,7 @@ class _Batch:
     pair: _Pair
     held: list                      # an _Output per output
     last: bool                      # the pair's last batch
+    index: int = 0                  # its place among the run's batches (whose turn each task is)
 
 
 class _Stream:
@@ -469,11 +470,7 @@ class _Stream:
         self.comm, self.scene, self.f = comm, scene, f
         self.after_output, self.timings, self.threshold = after_output, timings, threshold
         self.tasks = assign(scene, comm.size)
-        sets = list(enumerate(s for s, _ in scene.sample_sets))
-        self.needs = {o: [k for k, spec in sets if any(self.tasks[(spec.invariant, fm)] == o for fm in scene.forms)]
-                      for o in sorted(set(self.tasks.values()))}
-        rank = comm.rank
-        self.others = [r for r in range(comm.size) if r != rank] if rank in self.needs else []
+        self.batches = 0                   # batches closed so far, any pair's: the same count on every rank
         self.pending, self.writing, self.sending = [], [], []
         self.balance = (0.0, None)         # rank 0: (offload, speed) of the latest pair with every rank's clocks
         self.plan = None
@@ -482,6 +479,27 @@ class _Stream:
         self.rates = {}                    # rank 0: {rank: (pair, rates)}: the latest each rank sent
         self.spent = {"invariants": 0.0, "hdf5": 0.0, "gather": 0.0}   # seconds outside the advance, any pair's
         self.started = None                # rank 0, --force: called once the first rows are written
+
+    def owners(self, j):
+        """{(invariant, form): rank} of batch ``j``: the assignment (:func:`assign`, longest task
+        first to the least loaded rank) turned by j ranks, so that over any R consecutive batches
+        every rank runs every task once: the largest task bounds how late a batch's values come,
+        not how many outputs a second the ranks get through (docs/benchmarks.md, "Distributed
+        output").  A task is the same function of the same points on any rank: no bit changes."""
+        size = self.comm.size
+        return {key: (r + j) % size for key, r in self.tasks.items()}
+
+    def needs(self, j):
+        """{owner: [set index]} of batch ``j``: which ranks need which sets' parts."""
+        own = self.owners(j)
+        sets = list(enumerate(s for s, _ in self.scene.sample_sets))
+        return {o: [k for k, spec in sets if any(own[(spec.invariant, fm)] == o for fm in self.scene.forms)]
+                for o in sorted(set(own.values()))}
+
+    def others(self, j):
+        """The ranks whose parts of batch ``j`` this rank waits for (none unless it owns a task)."""
+        rank = self.comm.rank
+        return [r for r in range(self.comm.size) if r != rank] if rank in self.needs(j) else []
 
     def charge(self, clock, phase, seconds):
         """Book seconds of output work or exchange to a pair's clock and to the rank's running total."""
@@ -524,11 +542,12 @@ class _Stream:
         """Send the batch's parts to the task owners, queue its tasks, and run (rank 0: write) what is ready."""
         comm, t0 = self.comm, time.perf_counter()
         held, pair.held = pair.held, []
-        for o, sets in self.needs.items():
+        j, self.batches = self.batches, self.batches + 1
+        for o, sets in self.needs(j).items():
             if o != comm.rank:         # pickled at once: the state may move on while the message travels
                 self.sending.append(comm.isend({k: [x.parts[k] for x in held] for k in sets}, dest=o, tag=PARTS_TAG))
         self.current = pair
-        self.pending.append(_Batch(pair, held, last))
+        self.pending.append(_Batch(pair, held, last, j))
         self.sending = [r for r in self.sending if not r.Test()]
         self.charge(pair.clock, "gather", time.perf_counter() - t0)
         pair.clock["batches"] += 1
@@ -538,8 +557,9 @@ class _Stream:
             self.plan_next(pair, step, last)
 
     def _ready(self):
-        """Whether every other rank's parts of the oldest queued batch have arrived."""
-        return all(self.comm.iprobe(source=r, tag=PARTS_TAG) for r in self.others)
+        """Whether every other rank's parts of the oldest queued batch have arrived (a rank's parts
+        come in its batches' order, and only for the batches whose tasks this rank owns)."""
+        return all(self.comm.iprobe(source=r, tag=PARTS_TAG) for r in self.others(self.pending[0].index))
 
     def work(self, block):
         """Run the tasks of the queued batches in order: those whose parts are here; with ``block``,
@@ -551,13 +571,14 @@ class _Stream:
         comm, scene, rank, clock = self.comm, self.scene, self.comm.rank, b.pair.clock
         t0 = time.perf_counter()
         got = {}
-        for r in self.others:
+        for r in self.others(b.index):
             got[r] = comm.recv(source=r, tag=PARTS_TAG)      # parts[k][i]: set k at the batch's i-th output
         wait = time.perf_counter() - t0
         values = [{} for _ in b.held]
-        for k in self.needs.get(rank, []):
+        own = self.owners(b.index)
+        for k in self.needs(b.index).get(rank, []):
             spec = scene.sample_sets[k][0]
-            forms = [fm for fm in scene.forms if self.tasks[(spec.invariant, fm)] == rank]
+            forms = [fm for fm in scene.forms if own[(spec.invariant, fm)] == rank]
             for i, v in enumerate(values):
                 parts = [got[r][k][i] if r != rank else b.held[i].parts[k] for r in range(comm.size)]
                 q, p, lam, live = (np.concatenate([x[c] for x in parts]) for c in range(4))
