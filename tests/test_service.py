@@ -394,11 +394,13 @@ def test_task_owners_rotate_over_the_batches():
     (the same multiset), and over any R consecutive batches every rank runs every task once, so the
     largest task is no rank's every batch (issue: MPI without the ceiling)."""
     from types import SimpleNamespace
-    from integrators.service.diagnostics import assign
+    from integrators.service.diagnostics import assign_sets
     scene = parse_scene(SMALL)
     for size in (1, 2, 3, 5, 8, 16):
         st = driver._Stream(SimpleNamespace(size=size, rank=0), scene, None, None, {}, 1e-10)
-        base = assign(scene, size)
+        base = assign_sets(scene, size)
+        assert all(base[("I1", f)] == base[("I1", "canonical")] for f in scene.forms)   # a set's forms together
+        assert size == 1 or base[("I1", "canonical")] != base[("I2", "canonical")]      # the sets apart
         for j0 in (0, 7):
             for key in base:
                 assert sorted(st.owners(j0 + j)[key] for j in range(size)) == list(range(size))

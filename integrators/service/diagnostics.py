@@ -28,6 +28,23 @@ COST_PER_POINT = {("I1", "canonical"): 0.25, ("I1", "noncanonical"): 0.20, ("I1"
                   ("I2", "canonical"): 1.85, ("I2", "noncanonical"): 1.32, ("I2", "corrected"): 3.68}
 
 
+def assign_sets(scene, size) -> dict:
+    """{(invariant, form): rank} with every form of a set on one rank (the sets longest first to the
+    least loaded): a rank computes a set's forms together, sharing the transforms of q
+    (invariants.forms), which one form per rank would repeat.  The driver turns this by one rank a
+    batch (driver._Stream.owners), so the ranks take the sets in turn and share the work over
+    batches rather than within one.  Deterministic."""
+    load = np.zeros(size)
+    out = {}
+    sets = [(sum(COST_PER_POINT[(spec.invariant, f)] for f in scene.forms) * spec.count, spec.invariant)
+            for spec, _ in scene.sample_sets]
+    for cost, inv in sorted(sets, key=lambda t: (-t[0], t[1])):
+        r = int(np.argmin(load))
+        load[r] += cost
+        out.update({(inv, f): r for f in scene.forms})
+    return out
+
+
 def assign(scene, size, busy=None) -> dict:
     """{(invariant, form): rank}: every task of the scene's sets given to a rank, the longest first
     to the least loaded (``busy[r]``: work a rank already has, in the same units; rank 0 writes the

@@ -25,7 +25,7 @@ import numpy as np
 
 from . import output
 from ..engine import Engine, MapEngine, State, march, set_threads
-from .diagnostics import Diagnostics, assign
+from .diagnostics import Diagnostics, assign_sets
 from .ranks import _balance, _split, communicator, default_threads
 
 
@@ -469,7 +469,7 @@ class _Stream:
     def __init__(self, comm, scene, f, after_output, timings, threshold):
         self.comm, self.scene, self.f = comm, scene, f
         self.after_output, self.timings, self.threshold = after_output, timings, threshold
-        self.tasks = assign(scene, comm.size)
+        self.tasks = assign_sets(scene, comm.size)   # turned by one rank a batch: owners()
         self.batches = 0                   # batches closed so far, any pair's: the same count on every rank
         self.pending, self.writing, self.sending = [], [], []
         self.balance = (0.0, None)         # rank 0: (offload, speed) of the latest pair with every rank's clocks
@@ -481,8 +481,8 @@ class _Stream:
         self.started = None                # rank 0, --force: called once the first rows are written
 
     def owners(self, j):
-        """{(invariant, form): rank} of batch ``j``: the assignment (:func:`assign`, longest task
-        first to the least loaded rank) turned by j ranks, so that over any R consecutive batches
+        """{(invariant, form): rank} of batch ``j``: the assignment (:func:`assign_sets`: a set's
+        forms on one rank, longest set first to the least loaded) turned by j ranks, so that over any R consecutive batches
         every rank runs every task once: the largest task bounds how late a batch's values come,
         not how many outputs a second the ranks get through (docs/benchmarks.md, "Distributed
         output").  A task is the same function of the same points on any rank: no bit changes."""
