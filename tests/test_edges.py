@@ -222,9 +222,10 @@ def test_force_replaces_the_old_file_only_once_the_new_run_has_started(tmp_path)
     with h5py.File(old) as f:
         assert int(f.attrs["steps"]) == 30
     old.write_bytes(before)
-    driver.STOP.append(KeyboardInterrupt())      # stopped before its first step: the old file stays
+    stop = driver.StopRequest()
+    stop.set(KeyboardInterrupt())                 # stopped before its first step: the old file stays
     with pytest.raises(KeyboardInterrupt):
-        driver.run(scene(30), old, force=True, progress=False)
+        driver.run(scene(30), old, force=True, progress=False, stop=stop)
     assert old.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["a.h5"]
 
 

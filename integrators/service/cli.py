@@ -26,6 +26,8 @@ import time
 
 import numpy as np
 
+from .stop import StopRequest
+
 EXIT_OK, EXIT_NOT_OK, EXIT_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 
 
@@ -33,12 +35,14 @@ class Terminated(BaseException):
     """SIGTERM (what batch schedulers send), raised in the main thread like KeyboardInterrupt."""
 
 
+STOP = StopRequest()      # what the signal handlers set and cmd_run passes to the run
+
+
 def _on_signal(signum, frame):
     """Leave the exception with the driver, which raises it before its next step.  Raising here
     instead would land wherever Python happens to be, including inside object destructors and
     weakref callbacks (h5py's), where the exception is swallowed with a printed traceback."""
-    from . import driver
-    driver.STOP.append(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
+    STOP.set(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
 
 
 def _rank() -> int:
@@ -154,7 +158,8 @@ def cmd_run(args) -> int:
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
-                    progress=False if args.quiet else None, version=__version__, threads=threads)
+                    progress=False if args.quiet else None, version=__version__, threads=threads,
+                    stop=STOP)
     if comm.rank == 0:
         code = _print_summary(summaries, out)
         if note:
@@ -367,8 +372,7 @@ def main(argv=None) -> int:
     finally:
         for signum, old_handler in previous.items():
             signal.signal(signum, old_handler)
-        if "integrators.service.driver" in sys.modules:
-            sys.modules["integrators.service.driver"].STOP.clear()
+        STOP.clear()
 
 
 if __name__ == "__main__":

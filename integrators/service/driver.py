@@ -26,15 +26,8 @@ import numpy as np
 from . import output
 from ..engine import Engine, MapEngine, State, march, set_threads
 from .diagnostics import Diagnostics, assign_sets
+from .stop import StopRequest  # noqa: F401  (run's stop argument; tests make one)
 from .ranks import _balance, _split, communicator, default_threads
-
-
-STOP = []      # exceptions left by a signal handler (integrators.service.cli); raised before the next step
-
-
-def _check_stop():
-    if STOP:
-        raise STOP.pop()
 
 
 @dataclasses.dataclass
@@ -142,7 +135,7 @@ def _resume_plan(path, scene):
 
 
 def run(scene, path, *, resume=False, force=False, comm=None, progress=None, version="0", after_output=None,
-        threads=None):
+        threads=None, stop=None):
     """Run every pair of ``scene`` and write ``path``; returns a list of PairSummary (rank 0) or None.
 
     threads : threads over points on each rank (default: :func:`default_threads`); the numbers are
@@ -151,7 +144,10 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     resume : continue the pairs of an interrupted file, or extend a finished one when only
         ``run.steps`` grew (the result is bitwise the run of the longer scene).
     after_output : optional callback(pair, step) on rank 0 after each flushed output (tests use it).
+    stop : a :class:`StopRequest` (or any callable that raises to stop), checked before each pair
+        and between the engine's calls: the file stays readable up to its last output.
     """
+    check = stop if stop is not None else (lambda: None)
     from invariants import UNDER_RESOLVED
     comm = comm or communicator()
     rank = comm.rank
@@ -226,8 +222,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             stream.started = replacing.commit
         jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, todo) if job is not None]
         for i, (tab_name, proj, job) in enumerate(jobs):
-            _check_stop()
-            _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, i == 0, i + 1 < len(jobs), bar)
+            check()
+            _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, i == 0, i + 1 < len(jobs), bar, check)
         w0 = time.perf_counter()
         stream.drain()
         ends = comm.gather(time.perf_counter() - w0, root=0)
@@ -298,7 +294,7 @@ def _close_quietly(f):
         pass
 
 
-def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_next, bar):
+def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_next, bar, check):
     """Advance one pair on this rank from its start (or checkpoint) to scene.steps, handing each
     batch of outputs to ``stream``; the pair's tasks and rows may finish during the next pair."""
     rank, size = comm.rank, comm.size
@@ -366,7 +362,7 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         done[0] = step
 
     clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
-                              _check_stop)
+                              check)
     if not measured:
         first_interval()
     stream.take(pair, st, scene.steps, checkpoint=scene.steps == final, flush=True, last=True)

@@ -162,6 +162,7 @@ class Scene:
     system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
     step_maps: tuple = ()            # run.step_maps specs, in order
+    _built: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)   # system, tableaus: made once
 
     @property
     def pairs(self):
@@ -193,15 +194,24 @@ class Scene:
         return -(-self.steps // self.output_every) + 1
 
     def system(self):
-        """The scene's System: a built-in one, one from ϑ and H in the scene, or a user function's."""
-        return _make_system(self.system_spec or {"name": self.system_name}, self.system_params, self.base)
+        """The scene's System: a built-in one, one from ϑ and H in the scene, or a user function's;
+        made once (a scene copied with other steps shares it; one with another system does not)."""
+        key = ("system", repr(self.system_spec), repr(self.system_params), self.system_name, self.base)
+        if key not in self._built:
+            self._built[key] = _make_system(self.system_spec or {"name": self.system_name}, self.system_params,
+                                            self.base)
+        return self._built[key]
 
     def tableau(self, label):
-        """The Tableau of a run.tableaus entry (by its pair label)."""
-        if label in self.tableau_files:
-            from ..tableaus import tableau_from_file
-            return tableau_from_file(self.tableau_files[label])
-        return builtin_tableau(label)
+        """The Tableau of a run.tableaus entry (by its pair label), made once."""
+        key = ("tableau", label, self.tableau_files.get(label))
+        if key not in self._built:
+            if label in self.tableau_files:
+                from ..tableaus import tableau_from_file
+                self._built[key] = tableau_from_file(self.tableau_files[label])
+            else:
+                self._built[key] = builtin_tableau(label)
+        return self._built[key]
 
     def loop_points(self):
         """(N, d) loop sample points or None."""
