@@ -5,7 +5,8 @@ blocks, one per rank; from the second pair on, the blocks are sized from each ra
 advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank
 advances its block with each pair.  At every output each rank keeps the per-point errors of its
 points and its part of each sample set; once a batch of outputs (about two seconds of advancing)
-it sends the sets' parts to the ranks that were given their invariant tasks and goes on, without
+it sends the sets' parts to the ranks that own their invariant tasks in that batch (a set's forms
+on one rank, the owners turned by one rank a batch: ``_Stream.owners``) and goes on, without
 waiting for anyone (``_Stream``).  A task owner runs a batch's tasks once the parts have arrived,
 and every rank sends its pieces to rank 0, which appends the rows to the HDF5 file in order (see
 :mod:`integrators.service.output`); about every ``output.checkpoint_seconds`` and at a pair's end
