@@ -31,8 +31,8 @@ OSCILLATION = 0.1       # linear: an oscillation up to this share of the final d
 DRAWN = ("round-off", "bounded", "random walk", "linear", "faster")
 
 
-def synthetic(law, rng):
-    n = int(rng.integers(200, 4001))
+def synthetic(law, rng, n=None):
+    n = int(rng.integers(200, 4001)) if n is None else n
     t = np.arange(1, n + 1, dtype=float)
     T = t[-1]
     noise = 1 + rng.uniform(0, 0.3) * rng.standard_normal(n) if law not in ("round-off", "random walk") else 1.0
@@ -63,12 +63,12 @@ def synthetic(law, rng):
     return t, np.abs(a * t ** 3 * (1 + 0.1 * np.sin(t)) * noise)
 
 
-def confusion(count, seed=0):
+def confusion(count, seed=0, samples=None):
     rng = np.random.default_rng(seed)
     M = {d: {f: 0 for f in LAWS} for d in DRAWN}
     for law in DRAWN:
         for _ in range(count):
-            t, e = synthetic(law, rng)
+            t, e = synthetic(law, rng, samples)
             M[law][growth_law(t, e).law] += 1
     return M
 
@@ -143,8 +143,10 @@ def main():
     ap.add_argument("--series", type=int, default=1000)
     ap.add_argument("--out", default=str(ROOT / "docs/figures/growth_laws.json"))
     ap.add_argument("--no-paper", action="store_true", help="skip the engine runs of the paper's sets")
+    ap.add_argument("--samples", type=int, default=None, help="every series this many samples (default 200-4,000)")
+    ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
-    M = confusion(args.series)
+    M = confusion(args.series, args.seed, args.samples)
     print("| drawn \\ found | " + " | ".join(LAWS) + " | correct |")
     print("|---|" + "---:|" * (len(LAWS) + 1))
     for d in DRAWN:

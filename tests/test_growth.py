@@ -101,3 +101,4 @@ def test_a_run_file_carries_the_laws_and_the_summary_shows_them(tmp_path, capsys
     assert run["GLRK2-symmetric"].growth["I2 noncanonical"][0] == "round-off"
     line = next(ln for ln in text.splitlines() if ln.startswith("GLRK1-standard"))
     assert "linear" in line
+    assert "growth laws from 21 outputs" in text          # a short run says what its laws can tell

@@ -1,5 +1,6 @@
 """The Python side of the service: a scene run from Python (integrators.service.run), results as
 xarray, the notebook's HTML, and the progress bar (tqdm)."""
+import re
 import tomllib
 
 import numpy as np
@@ -80,7 +81,7 @@ def test_the_progress_bar_is_tqdm_and_counts_every_step(capsys):
     for k in range(4):
         bar.update(10, f"pair {k}")
     err = capsys.readouterr().err
-    assert "40.0/40.0" in err and "100%" in err and "pair 3" in err
+    assert re.search(r"40(\.0)?/40(\.0)?", err) and "100%" in err and "pair 3" in err
     quiet = Progress(40, enabled=False)
     quiet.update(40, "x")
     assert quiet.done == 40 and capsys.readouterr().err == ""

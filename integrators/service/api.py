@@ -21,7 +21,7 @@ import math
 import tomllib
 from pathlib import Path
 
-from .scene import RUN_KEYS, SceneError, builtin_scenes, parse_scene
+from .scene import RUN_KEYS, SceneError, parse_scene, scene_source
 
 
 def _toml_value(v, key):
@@ -66,14 +66,7 @@ def _source(scene):
         return None, scene.text, None
     if isinstance(scene, dict):
         return copy.deepcopy(scene), None, "<scene>"
-    spec = str(scene) if scene is not None else "default"
-    path = builtin_scenes().get(spec) or Path(spec)
-    if not Path(path).exists():
-        raise SceneError(f"scene '{spec}' is neither a file nor a built-in scene ({', '.join(builtin_scenes())})")
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"cannot read scene '{spec}': {exc}") from None
+    text, path = scene_source(None if scene is None else str(scene))
     return None, text, str(path)
 
 

@@ -649,6 +649,12 @@ def builtin_scenes() -> dict:
 
 def load_scene(spec: str | None) -> Scene:
     """A built-in scene by name, a TOML file by path, or the default scene (None)."""
+    text, path = scene_source(spec)
+    return parse_scene(text, origin=str(path))
+
+
+def scene_source(spec: str | None) -> tuple:
+    """(TOML text, path) of a built-in scene by name, a TOML file by path, or the default (None)."""
     spec = spec or "default"
     scenes = builtin_scenes()
     if spec in scenes:
@@ -663,4 +669,4 @@ def load_scene(spec: str | None) -> Scene:
         raise SceneError(f"scene '{spec}' is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
         raise SceneError(f"cannot read scene '{spec}': {exc.strerror or exc}") from None
-    return parse_scene(text, origin=str(path))
+    return text, path
