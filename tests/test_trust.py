@@ -283,14 +283,16 @@ def _wait_for_rows(path, pair, rows, proc, limit=120):
 def test_a_signal_flushes_says_how_to_resume_and_resume_finishes(tmp_path, signame, code):
     import signal
     scene = tmp_path / "gc.toml"
-    scene.write_text(GC.replace("steps = 40", "steps = 400"))
+    # about 5 s of stepping (2 pairs of 464 points, 20,000 steps): a signal sent after the fifth row
+    # lands mid-run even on a loaded machine (at 400 steps the run could finish first and exit 1)
+    scene.write_text(GC.replace("steps = 40", "steps = 20000").replace("output_every = 4", "output_every = 200"))
     out = tmp_path / "gc.h5"
     proc = subprocess.Popen([str(BIN / "poincare"), "run", str(scene), "-o", str(out), "-q"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert _wait_for_rows(out, "GLRK2-symmetric", 5, proc)
     proc.send_signal(getattr(signal, signame))
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == code
+    assert proc.returncode == code, err
     assert err.count("\n") == 1 and signame in err and "--resume" in err and "Traceback" not in err
     with h5py.File(out) as f:
         n = f["runs/GLRK2-symmetric/t"].shape[0]
