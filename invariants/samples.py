@@ -127,3 +127,31 @@ def _pair(v, key):
     if not ok:
         raise ValueError(f"params.{key} must be a list of 2 numbers, got {v!r}")
     return float(v[0]), float(v[1])
+
+
+# -- nested refinement (a set's levels: the driver's refine_to) ------------------------------------
+def refined_grid(grid: tuple, level: int) -> tuple:
+    """The grid of a set ``level`` refinements on: a loop of N points has N·2^level (τ = j/(N·2^level)
+    keeps every old τ), a Chebyshev surface (n_σ, n_τ) has (2^level(n_σ − 1) + 1, 2^level(n_τ − 1) + 1)
+    (the extrema cos(πj/(n − 1)) nest: n → 2n − 1 keeps every old point)."""
+    if len(grid) == 1:
+        return (grid[0] << level,)
+    return tuple(((n - 1) << level) + 1 for n in grid)
+
+
+def first_level(grid: tuple, level: int) -> np.ndarray:
+    """For each point of the grid ``level`` refinements on (:func:`refined_grid`), the level at which
+    it first appears (0: a point of the original set).  Along one axis, index j of the refined grid
+    is a point of level ℓ's grid when 2^(level − ℓ) divides j; a surface point appears when both its
+    indices have.  Row-major order within one level is row-major order in the refined grid, so
+    ``x[first_level(g, L) == l]`` lists level l's new points in the order of level l's own grid."""
+    def axis(m):
+        j = np.arange(m)
+        v = np.zeros(m, dtype=np.int64)            # 2-adic valuation of j, capped at level (j = 0: level)
+        for k in range(1, level + 1):
+            v[(j % (1 << k)) == 0] = k
+        return level - v
+    axes = [axis(m) for m in refined_grid(grid, level)]
+    if len(axes) == 1:
+        return axes[0]
+    return np.maximum(axes[0][:, None], axes[1][None, :])

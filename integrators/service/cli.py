@@ -105,10 +105,19 @@ def _print_summary(summaries, out, n_outputs=None):
             notes.append(f"  {_printable(s.pair)}: {s.breakdowns} of {total} points broke down (the first at t = "
                          f"{first:g}); a set's errors are over its outputs before its first broken point "
                          "(— where there are none after t = 0)")
+        clocks = s.timings.get("per_rank") or [s.timings]
+        catch_up = sum(c.get("refine", 0.0) for c in clocks)
+        if s.refined:
+            sets = [f"the {'loop' if inv == 'I1' else 'surface'} from {base:,} to {most:,} points (from t = {t:g})"
+                    for inv, (t, base, most) in s.refined.items()]
+            notes.append(f"  {_printable(s.pair)}: refined {' and '.join(sets)}; the new points, started at t = 0, "
+                         f"took {catch_up:.1f} s to advance")
         for inv, (t, bad, total) in s.unresolved_from.items():
+            at_most = s.refined.get(inv, (None, None, None))[2]
             notes.append(f"  * {s.pair}: the {'loop' if inv == 'I1' else 'surface'} was under-resolved at {bad} of "
                          f"{total} outputs (first at t = {t:g}); its {inv} errors are over the others only "
-                         "(refine the set or shorten the run)")
+                         + (f"(on {at_most:,} points, its refine_to: raise it or shorten the run)" if at_most else
+                            "(refine the set, or let it refine itself with refine_to, or shorten the run)"))
     if n_outputs is not None and n_outputs < SHORT_SERIES and any(s.laws for s in summaries):
         notes.append(f"  growth laws from {n_outputs} outputs: round-off, linear and faster hold (94-100 % right on "
                      f"synthetic series this short), but bounded and random walk are told apart only from about "

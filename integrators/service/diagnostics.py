@@ -111,7 +111,8 @@ class Diagnostics:
         ({(invariant, form): (value, resolution, computed, all live)}).
 
         ``resolution/<set>`` is the largest monitor over the forms (NaN when a point broke down or a
-        value was not finite); ``resolved/<set>`` is 1 when it is at most invariants.UNDER_RESOLVED.
+        value was not finite); ``resolved/<set>`` is 1 when it is at most invariants.UNDER_RESOLVED;
+        ``points_used/<set>`` (a set with ``refine_to``) the points of the level the values are on.
         """
         from invariants import UNDER_RESOLVED
         row = {"t": t}
@@ -126,6 +127,8 @@ class Diagnostics:
                     res = max(res, r) if computed else np.nan
             row[f"resolution/{inv}"] = res
             row[f"resolved/{inv}"] = 1 if res <= UNDER_RESOLVED else 0
+            if (inv, "points") in values:    # a set that refines itself: the points its values were taken on
+                row[f"points_used/{inv}"] = values[(inv, "points")]
         for key in errors[0] if errors else ():
             row[key] = float(np.max([e[key] for e in errors]))
         return row

@@ -27,6 +27,7 @@ import numpy as np
 from . import output
 from ..engine import Engine, MapEngine, State, march, set_threads
 from .diagnostics import Diagnostics, assign_sets
+from .refine import Refiner, refined_values
 from .stop import StopRequest  # noqa: F401  (run's stop argument; tests make one)
 from .ranks import _balance, _split, communicator, default_threads
 
@@ -42,6 +43,7 @@ class PairSummary:
     unresolved_from: dict = dataclasses.field(default_factory=dict)   # {'I1': first t the set was under-resolved}
     breakdown: tuple = (None, 0)     # (first breakdown time or None, points of the run)
     laws: dict = dataclasses.field(default_factory=dict)   # {'I1 form' | 'energy' | …: growth law}
+    refined: dict = dataclasses.field(default_factory=dict)  # {'I1'|'I2': (first t refined, points, most used)}
 
 
 class Progress:
@@ -303,11 +305,16 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
     name = output.pair_name(tab_name, proj)
     start_step, saved = job
     if proj == "map":                          # a user's step map (run.step_maps)
-        engine, s_tab = MapEngine(scene.step_map(tab_name), system, h, tab_name), 1
+        def make_engine():
+            return MapEngine(scene.step_map(tab_name), system, h, tab_name)
+        s_tab = 1
     else:
-        engine, s_tab = Engine(system, scene.tableau(tab_name), proj, h), scene.tableau(tab_name).s
+        def make_engine():
+            return Engine(system, scene.tableau(tab_name), proj, h)
+        s_tab = scene.tableau(tab_name).s
+    engine = make_engine()
     clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0, "wait_plan": 0.0, "wait_gather": 0.0,
-             "wait_recv": 0.0, "batches": 0}
+             "wait_recv": 0.0, "refine": 0.0, "refine_point_steps": 0, "batches": 0}
     w0 = time.perf_counter()
     if first:                                  # the run's first pair: an even split, batches from its first interval
         plan = (comm.bcast(_split(n, size) if rank == 0 else None, root=0), None, None)
@@ -323,7 +330,9 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
     t_start = time.perf_counter()
     pair = _Pair(name, (lo, hi), Diagnostics(scene, system, q0[lo:hi]), clock, batch or 1, cadence or 1, t_start,
-                 dict(stream.spent), start_step, (start_step + scene.steps) // 2)
+                 dict(stream.spent), start_step, (start_step + scene.steps) // 2,
+                 refiners={spec.name: Refiner(spec, make_engine, scene.base, h, scene.output_every, check)
+                           for spec, _ in scene.sample_sets if spec.levels})
     if rank == 0:
         pair.g = output.pair_group(stream.f, name)
         wall0 = output.wall_clock(pair.g)
@@ -436,6 +445,7 @@ class _Pair:
     wall: object = None
     t_end: float | None = None
     at: int = 0                     # the step of the latest output taken
+    refiners: dict = dataclasses.field(default_factory=dict)  # {set name: Refiner}: its finer levels' new points
     breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
 
 
@@ -467,6 +477,8 @@ class _Stream:
         self.comm, self.scene, self.f = comm, scene, f
         self.after_output, self.timings, self.threshold = after_output, timings, threshold
         self.tasks = assign_sets(scene, comm.size)   # turned by one rank a batch: owners()
+        self.refining = {spec.invariant for spec, _ in scene.sample_sets if spec.levels}
+        self.order = {output.pair_name(t, p): k for k, (t, p) in enumerate(scene.pairs)}
         self.batches = 0                   # batches closed so far, any pair's: the same count on every rank
         self.pending, self.writing, self.sending = [], [], []
         self.balance = (0.0, None)         # rank 0: (offload, speed) of the latest pair with every rank's clocks
@@ -477,26 +489,30 @@ class _Stream:
         self.spent = {"invariants": 0.0, "hdf5": 0.0, "gather": 0.0}   # seconds outside the advance, any pair's
         self.started = None                # rank 0, --force: called once the first rows are written
 
-    def owners(self, j):
-        """{(invariant, form): rank} of batch ``j``: the assignment (:func:`assign_sets`: a set's
-        forms on one rank, longest set first to the least loaded) turned by j ranks, so that over any R consecutive batches
-        every rank runs every task once: the largest task bounds how late a batch's values come,
-        not how many outputs a second the ranks get through (docs/benchmarks.md, "Distributed
-        output").  A task is the same function of the same points on any rank: no bit changes."""
-        size = self.comm.size
-        return {key: (r + j) % size for key, r in self.tasks.items()}
+    def owners(self, j, k=0):
+        """{(invariant, form): rank} of batch ``j`` of the run's ``k``-th pair: the assignment
+        (:func:`assign_sets`: a set's forms on one rank, longest set first to the least loaded)
+        turned by j ranks, so that over any R consecutive batches every rank runs every task once:
+        the largest task bounds how late a batch's values come, not how many outputs a second the
+        ranks get through (docs/benchmarks.md, "Distributed output").  A set that refines itself
+        turns by pair instead (k ranks): its new points are advanced by the rank that takes its
+        tasks (integrators.service.refine), once a pair rather than once per rank.  A task is the
+        same function of the same points on any rank: no bit changes."""
+        size, refining = self.comm.size, self.refining
+        return {key: (r + (k if key[0] in refining else j)) % size for key, r in self.tasks.items()}
 
-    def needs(self, j):
-        """{owner: [set index]} of batch ``j``: which ranks need which sets' parts."""
-        own = self.owners(j)
+    def needs(self, j, k=0):
+        """{owner: [set index]} of batch ``j`` of the ``k``-th pair: which ranks need which sets' parts."""
+        own = self.owners(j, k)
         sets = list(enumerate(s for s, _ in self.scene.sample_sets))
         return {o: [k for k, spec in sets if any(own[(spec.invariant, fm)] == o for fm in self.scene.forms)]
                 for o in sorted(set(own.values()))}
 
-    def others(self, j):
-        """The ranks whose parts of batch ``j`` this rank waits for (none unless it owns a task)."""
+    def others(self, j, k=0):
+        """The ranks whose parts of batch ``j`` (of the ``k``-th pair) this rank waits for (none
+        unless it owns a task)."""
         rank = self.comm.rank
-        return [r for r in range(self.comm.size) if r != rank] if rank in self.needs(j) else []
+        return [r for r in range(self.comm.size) if r != rank] if rank in self.needs(j, k) else []
 
     def charge(self, clock, phase, seconds):
         """Book seconds of output work or exchange to a pair's clock and to the rank's running total."""
@@ -540,7 +556,7 @@ class _Stream:
         comm, t0 = self.comm, time.perf_counter()
         held, pair.held = pair.held, []
         j, self.batches = self.batches, self.batches + 1
-        for o, sets in self.needs(j).items():
+        for o, sets in self.needs(j, self.order[pair.name]).items():
             if o != comm.rank:         # pickled at once: the state may move on while the message travels
                 self.sending.append(comm.isend({k: [x.parts[k] for x in held] for k in sets}, dest=o, tag=PARTS_TAG))
         self.current = pair
@@ -556,7 +572,8 @@ class _Stream:
     def _ready(self):
         """Whether every other rank's parts of the oldest queued batch have arrived (a rank's parts
         come in its batches' order, and only for the batches whose tasks this rank owns)."""
-        return all(self.comm.iprobe(source=r, tag=PARTS_TAG) for r in self.others(self.pending[0].index))
+        b = self.pending[0]
+        return all(self.comm.iprobe(source=r, tag=PARTS_TAG) for r in self.others(b.index, self.order[b.pair.name]))
 
     def work(self, block):
         """Run the tasks of the queued batches in order: those whose parts are here; with ``block``,
@@ -568,23 +585,31 @@ class _Stream:
         comm, scene, rank, clock = self.comm, self.scene, self.comm.rank, b.pair.clock
         t0 = time.perf_counter()
         got = {}
-        for r in self.others(b.index):
+        k_pair = self.order[b.pair.name]
+        for r in self.others(b.index, k_pair):
             got[r] = comm.recv(source=r, tag=PARTS_TAG)      # parts[k][i]: set k at the batch's i-th output
         wait = time.perf_counter() - t0
         values = [{} for _ in b.held]
-        own = self.owners(b.index)
-        for k in self.needs(b.index).get(rank, []):
+        own = self.owners(b.index, k_pair)
+        for k in self.needs(b.index, k_pair).get(rank, []):
             spec = scene.sample_sets[k][0]
             forms = [fm for fm in scene.forms if own[(spec.invariant, fm)] == rank]
             for i, v in enumerate(values):
                 parts = [got[r][k][i] if r != rank else b.held[i].parts[k] for r in range(comm.size)]
                 q, p, lam, live = (np.concatenate([x[c] for x in parts]) for c in range(4))
                 shp = spec.grid + (q.shape[1],)
-                v.update(b.pair.diagnostics.set_values(spec, forms, q.reshape(shp), p.reshape(shp),
-                                                       lam.reshape(shp), live))
+                args = (spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp), live.reshape(spec.grid))
+                if spec.levels:       # a set that refines itself: the coarsest level that resolves it
+                    v.update(refined_values(b.pair.diagnostics, b.pair.refiners[spec.name], *args,
+                                            b.held[i].step, self.threshold))
+                else:
+                    v.update(b.pair.diagnostics.set_values(*args[:5], live))
         mine = [(x.errors, v, x.piece) for x, v in zip(b.held, values)]
         t1 = time.perf_counter()
-        self.charge(clock, "invariants", t1 - t0 - wait)
+        refine = sum(r.seconds for r in b.pair.refiners.values())
+        clock["refine_point_steps"] = sum(r.point_steps for r in b.pair.refiners.values())
+        spent, clock["refine"] = refine - clock["refine"], refine
+        self.charge(clock, "invariants", t1 - t0 - wait - spent)
         clock["wait_gather"] += wait
         self.charge(clock, "gather", wait)
         if rank == 0:
@@ -688,6 +713,6 @@ class _Stream:
 def finalize(path, scene):
     """Each pair's status and wall_time attributes, written, and the summaries."""
     return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown,
-                        laws={k: v.law for k, v in laws.items()})
-            for name, status, broke, errs, wall, unresolved, breakdown, laws in
+                        laws={k: v.law for k, v in laws.items()}, refined=refined)
+            for name, status, broke, errs, wall, unresolved, breakdown, laws, refined in
             output.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]

@@ -9,6 +9,9 @@ Layout (format ``poincare/2``)::
         I1/<form>, I2/<form> (n,)      invariants (only the forms asked for; I2 only with a surface)
         resolution/I1, resolution/I2 (n,)  resolution monitor of the loop / surface (largest over the forms)
         resolved/I1, resolved/I2     (n,)  1 where the set resolved its invariant (monitor ≤ threshold), else 0
+        points_used/I1, points_used/I2 (n,) a set with refine_to: the points of the level its invariant
+                                           was taken on (the coarsest that resolved it; integrators.service.refine);
+                                           attrs: points (the scene's own), refine_to
         energy_error        (n,)       max over points of |H − H₀|/|H₀|
         momentum_error      (n,)       max over points of |P − P₀|
         constraint_error    (n,)       max over points of |p − ϑ(q)|
@@ -212,6 +215,9 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
                 _series(g, f"{spec.invariant}/{form}")
             _series(g, f"resolution/{spec.invariant}")
             _series(g, f"resolved/{spec.invariant}", "u1")
+            if spec.levels:
+                ds = _series(g, f"points_used/{spec.invariant}", "i8")
+                ds.attrs["points"], ds.attrs["refine_to"] = spec.count, spec.refine_to
         for diag in scene.diagnostics:
             _series(g, f"{diag}_error")
         g.create_dataset("breakdown_time", data=np.full(npoints, np.inf), chunks=True, fletcher32=True)
@@ -553,8 +559,8 @@ def settle_checkpoint(g):
 
 def finish(path, names, n_outputs) -> list:
     """Write each pair's final status, wall_time and growth laws; [(name, status, breakdowns, errors,
-    wall time, unresolved, (first breakdown time or None, points), laws)] as :func:`pair_summary` and
-    :func:`growth_laws` give them."""
+    wall time, unresolved, (first breakdown time or None, points), laws, refined)] as :func:`pair_summary`,
+    :func:`growth_laws` and :func:`refined` give them."""
     out = []
     with h5py.File(path, "r+") as f:
         threshold = float(f.attrs.get("resolution_threshold", np.inf))
@@ -569,7 +575,21 @@ def finish(path, names, n_outputs) -> list:
             g.attrs["wall_time"] = wall
             bt = g["breakdown_time"][...]
             first = float(bt[np.isfinite(bt)].min()) if broke else None
-            out.append((name, status, broke, errs, wall, unresolved, (first, int(bt.size)), laws))
+            out.append((name, status, broke, errs, wall, unresolved, (first, int(bt.size)), laws, refined(g)))
+    return out
+
+
+def refined(g) -> dict:
+    """{'I1'|'I2': (first t on more points than the scene's, the scene's points, the most used)} of
+    a pair's sets that refined themselves (``points_used``; its attribute ``points``: the scene's)."""
+    out = {}
+    for inv in g.get("points_used", {}):
+        ds = g[f"points_used/{inv}"]
+        used, t, base = ds[...], g["t"][...], int(ds.attrs["points"])
+        n = min(used.size, t.size)
+        more = np.flatnonzero(used[:n] > base)
+        if more.size:
+            out[inv] = (float(t[more[0]]), base, int(used[:n].max()))
     return out
 
 
@@ -584,7 +604,8 @@ class PairRun:
     stored them; ``status``, ``wall_time``; ``under_resolved_from`` : {'I1'|'I2': first t} of a set
     that was under-resolved; ``growth`` : {'I1 form'|'I2 form'|'energy'|…: (law, exponent, its error,
     onset, log prefactor)} of a finished pair (invariants.growth: the fitted law C·t^α holds from the
-    onset; the datasets' growth_* attributes).
+    onset; the datasets' growth_* attributes); ``points_used`` : {'I1'|'I2': (n,)} of a set with
+    ``refine_to``, the points of the level each output's invariant was taken on.
     """
 
     name: str
@@ -600,6 +621,7 @@ class PairRun:
     points: dict
     under_resolved_from: dict = dataclasses.field(default_factory=dict)
     growth: dict = dataclasses.field(default_factory=dict)
+    points_used: dict = dataclasses.field(default_factory=dict)
 
     def __repr__(self):
         t = f"t = {self.t[0]:g} … {self.t[-1]:g}" if self.t.size else "no outputs"
@@ -614,7 +636,8 @@ class PairRun:
 
     def to_xarray(self, forms=None):
         """The pair as an ``xarray.Dataset`` over time ``t`` (and ``form``, ``point``): ``I1``, ``I2``
-        (t, form); ``resolution_I1``, ``resolved_I1``, … (t); the diagnostics' ``energy_error``, …
+        (t, form); ``resolution_I1``, ``resolved_I1``, ``points_used_I1`` (a refining set), … (t);
+        the diagnostics' ``energy_error``, …
         (t), each with its growth law in ``.attrs``; ``I1_growth_law``, ``I1_growth_exponent``, …
         (form); ``breakdown_time`` (point).  Attributes: pair, status, wall_time, under-resolved
         times.  ``ds.I2.sel(form="corrected").plot()`` draws a series."""
@@ -640,6 +663,8 @@ class PairRun:
                 data[f"resolution_{inv}"] = ("t", np.asarray(self.resolution[inv], float))
             if inv in self.resolved:
                 data[f"resolved_{inv}"] = ("t", np.asarray(self.resolved[inv]))
+            if inv in self.points_used:
+                data[f"points_used_{inv}"] = ("t", np.asarray(self.points_used[inv]))
         for key, v in self.errors.items():
             attrs = {}
             if key in self.growth:
@@ -809,7 +834,7 @@ def read_run(path) -> Run:
                     breakdown_time=_read(g, "breakdown_time", limit), points=sets("points"),
                     under_resolved_from={k.split("/")[1]: float(v) for k, v in g.attrs.items()
                                          if k.startswith("under_resolved_from/")},
-                    growth=_growth_attrs(g))
+                    growth=_growth_attrs(g), points_used=sets("points_used"))
             return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
                        scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
     except (DamagedFile, BusyFile, FileNotFoundError):

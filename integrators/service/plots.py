@@ -8,6 +8,8 @@
 * ``<stem>_diagnostics.png``: energy, momentum and constraint errors, one panel each, every pair.
 * ``<stem>_points.png``: the loop and the surface in the (q¹, q²) plane at five output times,
   when the run stored its points.
+* ``<stem>_refinement.png``: for sets with ``refine_to``, the points each output's invariant was
+  taken on, against time, every pair.
 """
 from __future__ import annotations
 
@@ -178,4 +180,33 @@ def plot_file(path, outdir=None):
     out = outdir / f"{stem}_points.png"
     if _points(run, out):
         written.append(out)
+    out = outdir / f"{stem}_refinement.png"
+    if _refinement(run, out):
+        written.append(out)
     return written
+
+
+def _refinement(run, out):
+    """The points each refining set's invariant was taken on, against time, every pair (a step line)."""
+    sets = [inv for inv in ("I1", "I2") if any(inv in pr.points_used for pr in run.pairs.values())]
+    if not sets:
+        return False
+    fig, axes = plt.subplots(1, len(sets), figsize=(5.2 * len(sets), 3.4), squeeze=False)
+    for ax, inv in zip(axes[0], sets):
+        for k, (name, pr) in enumerate(run.pairs.items()):
+            if inv in pr.points_used and pr.t.size:
+                n = min(pr.t.size, pr.points_used[inv].size)
+                ax.step(pr.t[:n], pr.points_used[inv][:n], where="post", lw=1.0, label=name,
+                        ls=("-", "--", ":", "-.")[k // 10 % 4])
+        ax.set_yscale("log", base=2)
+        ax.set_title(f"{'loop' if inv == 'I1' else 'surface'} ({inv}): points used", fontsize=10)
+        ax.set_xlabel("t", fontsize=8)
+        ax.grid(True, which="major", lw=0.3)
+        ax.tick_params(labelsize=7)
+    axes[0, -1].legend(fontsize=6, ncol=2)
+    fig.suptitle("sample sets that refine themselves: the coarsest nested level that resolves the invariant",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return True

@@ -26,6 +26,8 @@ A scene file::
     points = 2000
     params = { rx = 0.5 }                 # optional shape parameters; any system: shape = "ellipse" with
                                           # params = { d = 2, center = [1.0, 1.0], radii = [0.04, 0.04], plane = [0, 1] }
+    refine_to = 16000                     # optional: the loop may refine itself up to this many points
+                                          # (N → 2N, every old τ kept; the surface: n → 2n − 1 per direction)
 
     [surface]                             # optional: a surface of n_sigma × n_tau Chebyshev points
     shape = "guiding_centre"              # or "rectangle" (params d, center, size, plane), or "module:function" /
@@ -33,6 +35,7 @@ A scene file::
                                           # Chebyshev points in [0, 1], returning (nσ, nτ, d)
     n_sigma = 100
     n_tau = 100
+    refine_to = 40000                     # optional: the surface may refine itself up to n_sigma·n_tau this large
 
     [run]
     tableaus = ["GLRK1", "GLRK2", "SRK3"]  # built-in names or tableau TOML files (as `poincare audit` reads)
@@ -95,6 +98,7 @@ class LoopSpec:
     points: int
     shape: str = "guiding_centre"            # a built-in shape (invariants.samples) or module:function
     params: dict = dataclasses.field(default_factory=dict)
+    refine_to: int | None = None             # the most points refinement may grow the loop to
     name = "loop"
     invariant = "I1"
 
@@ -112,6 +116,17 @@ class LoopSpec:
         from invariants import samples
         return samples.loop(_shape(self.shape, "loop.shape", base), self.points, **self.params)
 
+    def at_level(self, level):
+        """The loop ``level`` refinements on (N·2^level points, every old τ kept); level 0 is this one."""
+        from invariants.samples import refined_grid
+        return self if level == 0 else dataclasses.replace(self, points=refined_grid(self.grid, level)[0],
+                                                           refine_to=None)
+
+    @property
+    def levels(self) -> int:
+        """How many refinements ``refine_to`` allows (0 without it)."""
+        return _levels(self)
+
 
 @dataclasses.dataclass(frozen=True)
 class SurfaceSpec:
@@ -121,6 +136,7 @@ class SurfaceSpec:
     n_tau: int
     shape: str = "guiding_centre"
     params: dict = dataclasses.field(default_factory=dict)
+    refine_to: int | None = None             # the most points (n_σ·n_τ) refinement may grow the surface to
     name = "surface"
     invariant = "I2"
 
@@ -136,6 +152,28 @@ class SurfaceSpec:
         """(n_σ, n_τ, d) sample points."""
         from invariants import samples
         return samples.surface(_shape(self.shape, "surface.shape", base), self.n_sigma, self.n_tau, **self.params)
+
+    def at_level(self, level):
+        """The surface ``level`` refinements on (n → 2n − 1 Chebyshev points per direction, nested)."""
+        from invariants.samples import refined_grid
+        if level == 0:
+            return self
+        n_sigma, n_tau = refined_grid(self.grid, level)
+        return dataclasses.replace(self, n_sigma=n_sigma, n_tau=n_tau, refine_to=None)
+
+    @property
+    def levels(self) -> int:
+        """How many refinements ``refine_to`` allows (0 without it)."""
+        return _levels(self)
+
+
+def _levels(spec) -> int:
+    if spec.refine_to is None:
+        return 0
+    level = 0
+    while spec.at_level(level + 1).count <= spec.refine_to:
+        level += 1
+    return level
 
 
 @dataclasses.dataclass(frozen=True)
@@ -242,6 +280,10 @@ class Scene:
         return np.concatenate([spec.sample(self.base).reshape(-1, system.d) for spec, _ in self.sample_sets])
 
 
+def _grid_text(spec):
+    return f"{spec.points} τ" if spec.name == "loop" else f"{spec.n_sigma} × {spec.n_tau} Chebyshev points"
+
+
 def _shape(spec, key, base=None):
     if ":" not in spec:
         return spec
@@ -256,8 +298,8 @@ _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
     "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
                "momentum": str, "domain": list, "function": str},
-    "loop": {"shape": str, "points": int, "params": dict},
-    "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict},
+    "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
+    "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
             "forms": list, "diagnostics": list, "store_points": bool},
     "output": {"path": str, "checkpoint_seconds": float},
@@ -355,6 +397,11 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
         for k in ("n_sigma", "n_tau"):
             if getattr(surface, k) < 2:
                 raise SceneError(f"surface.{k} must be at least 2, got {getattr(surface, k)}")
+    for set_ in (loop, surface):
+        if set_ is not None and set_.refine_to is not None and set_.levels == 0:
+            raise SceneError(f"{set_.name}.refine_to = {set_.refine_to:,} allows no refinement: the {set_.name}'s "
+                             f"first refinement has {set_.at_level(1).count:,} points "
+                             f"({_grid_text(set_.at_level(1))}); give at least that, or leave refine_to out")
     maps = tuple(run.get("step_maps", ()))
     for key in ("h", "steps") + (() if maps else ("tableaus", "projections")):
         if key not in run:
@@ -586,8 +633,10 @@ def _check_memory(scene, system):
 
 
 def _check_points(scene, system):
-    for spec, _ in scene.sample_sets:
-        what = spec.name
+    specs = [(spec, spec.name) for spec, _ in scene.sample_sets]
+    specs += [(spec.at_level(spec.levels), f"{spec.name} refined to {spec.at_level(spec.levels).count:,} points")
+              for spec, _ in scene.sample_sets if spec.levels]        # the finest level a refinement may reach
+    for spec, what in specs:
         try:
             q = np.asarray(spec.sample(scene.base), dtype=float)
         except SceneError:
@@ -597,7 +646,7 @@ def _check_points(scene, system):
                 msg = str(exc)
                 raise SceneError(f"{what}.{msg}" if msg.startswith("params") else f"{what}: {msg}") from None
             contract = ("f(tau, **params) with tau the (N,) array j/N in [0, 1), returning (N, d)"
-                        if what == "loop" else "f(sigma, tau, **params) with two (n_sigma, n_tau) arrays of "
+                        if spec.name == "loop" else "f(sigma, tau, **params) with two (n_sigma, n_tau) arrays of "
                         "Chebyshev points in [0, 1], returning (n_sigma, n_tau, d)")
             raise SceneError(f"{what}.shape '{spec.shape}' failed: {type(exc).__name__}: {exc} (a {what} shape "
                              f"is called as {contract})") from None
