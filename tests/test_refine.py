@@ -78,6 +78,10 @@ def test_refine_to_is_checked_in_one_line():
     with pytest.raises(SceneError, match="'loop.refine_to' must be int"):
         parse_scene(SCENE.replace("refine_to = 256", "refine_to = 2.5"))
     assert parse_scene(SCENE).loop.levels == 2 and parse_scene(SCENE).surface.levels == 1
+    # its finest level counts in the memory check, before a point of it is sampled
+    with pytest.raises(SceneError, match=r"^loop.refine_to = 100,000,000,000 \(up to 68,719,476,736 points\) "
+                                         r"needs about .* GiB of memory"):
+        parse_scene(SCENE.replace("refine_to = 256", "refine_to = 100000000000"))
 
 
 @pytest.fixture(scope="module")

@@ -622,9 +622,17 @@ def _check_memory(scene, system):
     # every local rank holds all points' samples and set values (~16 arrays of d doubles) and
     # advances its share; rank 0 also gathers every point's state for a checkpoint
     need = local * (MEMORY_BASE + 8 * 16 * d * n) + (per_point + state) * n
+    # a refining set's new points (up to refine_to) are advanced by one rank, its whole finest grid
+    # held while its invariants are taken
+    new = {spec.name: spec.at_level(spec.levels).count - spec.count for spec, _ in scene.sample_sets}
+    need += sum((per_point + 8 * 16 * d) * m for m in new.values())
     if need <= free:
         return
-    big = max((sp for sp, _ in scene.sample_sets), key=lambda sp: sp.count)
+    big = max((sp for sp, _ in scene.sample_sets), key=lambda sp: sp.count + new[sp.name])
+    if new[big.name]:
+        key = f"{big.name}.refine_to = {big.refine_to:,} (up to {big.at_level(big.levels).count:,} points)"
+        raise SceneError(f"{key} needs about {need / 2**30:,.1f} GiB of memory; this node has "
+                         f"{free / 2**30:,.1f} GiB available: give a smaller refine_to")
     key = ("loop.points = " if big.name == "loop" else
            f"surface.n_sigma × surface.n_tau = {big.n_sigma} × {big.n_tau} = ") + f"{big.count:,}"
     raise SceneError(f"{key} needs about {need / 2**30:,.1f} GiB of memory for {n:,} points "
