@@ -319,6 +319,35 @@ def test_sigterm_under_mpiexec_stops_every_rank(tmp_path):
         assert f["runs/GLRK2-symmetric/t"].shape[0] >= 5
 
 
+@pytest.mark.mpi
+def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path):
+    """Kill and resume on a different rank count: the checkpoint holds every point's state whatever
+    split wrote it, and the resumed file's rows are the uninterrupted 1-rank run's, bit for bit."""
+    import signal
+    scene = tmp_path / "gc.toml"
+    scene.write_text(GC.replace("steps = 40", "steps = 20000").replace("output_every = 4", "output_every = 200")
+                     + "[output]\ncheckpoint_seconds = 0.0\n")
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    rc = poincare("run", str(scene), "-o", str(full), "-q").returncode
+    proc = subprocess.Popen([str(BIN / "mpiexec"), "-n", "2", str(BIN / "poincare"), "run", str(scene), "-o",
+                             str(part), "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert _wait_for_rows(part, "GLRK2-symmetric", 5, proc)
+    proc.send_signal(signal.SIGTERM)
+    proc.communicate(timeout=60)
+    assert proc.returncode == 143
+    with h5py.File(part) as f:
+        assert f["runs/GLRK2-symplectic"].attrs["status"] == "pending"
+    r = poincare("run", str(scene), "-o", str(part), "-q", "--resume", n=3)
+    assert r.returncode == rc, r.stderr
+    skip = ("wall_clock", "checkpoint")
+    with h5py.File(full) as a, h5py.File(part) as b:
+        names = []
+        a.visit(lambda k: names.append(k) if isinstance(a[k], h5py.Dataset) and not any(x in k for x in skip)
+                else None)
+        assert names and all(np.array_equal(a[k][()], b[k][()], equal_nan=a[k].dtype.kind == "f") for k in names)
+        assert [a["runs"][k].attrs["status"] for k in a["runs"]] == [b["runs"][k].attrs["status"] for k in b["runs"]]
+
+
 def test_a_full_disk_is_one_line_and_leaves_a_readable_file(tmp_path):
     import resource
     import signal
