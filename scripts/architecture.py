@@ -87,6 +87,37 @@ def citations(name, tree):
     return found
 
 
+DRIVER_PARTS = ("transport", "tasks", "refine", "writer", "ranks", "clocks", "diagnostics", "output", "stop")
+
+
+def driver_parts(graph) -> list:
+    """The batch-run driver's parts: each module's one job (its docstring's first line) and who
+    imports it, read from the source; then the path of one batch through them."""
+    lines = ["", "## The driver's parts, and who calls whom", "",
+             "`integrators.service.driver` runs the pairs and joins these parts; each has one job:", "",
+             "| part | its job | used by |", "|---|---|---|"]
+    for part in DRIVER_PARTS:
+        name = f"integrators.service.{part}"
+        doc = ast.get_docstring(ast.parse((ROOT / "integrators" / "service" / f"{part}.py").read_text())) or ""
+        users = sorted(m for m, deps in graph.items() if name in deps)
+        lines.append(f"| `{part}` | {doc.splitlines()[0] if doc else ''} | "
+                     f"{', '.join(f'`{u.rsplit(chr(46), 1)[-1]}`' for u in users) or '—'} |")
+    lines += ["", "One batch of outputs on one rank (driver `_run_pair` → `_Stream`):", "",
+              "1. `engine.march` advances the rank's block; at each output `_Stream.take` keeps the points' "
+              "errors (`diagnostics`) and the rank's part of each set (`tasks.Tasks.parts`).",
+              "2. At the batch's end `_Stream.close_batch` sends the parts to the batch's task owners "
+              "(`tasks.Tasks.needs`, the rotation; `transport.Transport.send`) and goes on advancing.",
+              "3. A task owner, once the parts are here (`transport.Transport.arrived`), computes the sets' "
+              "values (`tasks.Tasks.run`; a refining set through `refine`) and sends them with its errors "
+              "and pieces to rank 0.",
+              "4. Rank 0 writes the batch's rows in order (`writer.Writer.write` → `output`), a pair's "
+              "status and clocks at its end (`writer.Writer.finish_pair`), and from about each pair's middle "
+              "sends the next pair's split (`ranks.Planner`, from the rates every rank sent; `clocks.Spent` "
+              "keeps them net of output work).",
+              "5. `stop.StopRequest`, passed in, is checked between the engine's calls."]
+    return lines
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paper", help="the paper's LaTeX, to check the cited labels")
@@ -113,6 +144,7 @@ def main():
              "| module | layer | imports |", "|---|---|---|"]
     for name, deps in graph.items():
         lines.append(f"| `{name}` | {layer(name)} | {', '.join(f'`{d}`' for d in deps) or '—'} |")
+    lines += driver_parts(graph)
     lines += ["", "## Paper labels and the code that implements them", "",
               "| label | cited in |", "|---|---|"]
     order = {"eq": 0, "tab": 1, "sec": 2, "app": 3, "fig": 4}

@@ -192,10 +192,10 @@ def test_a_refining_sets_tasks_stay_on_one_rank_for_a_pair():
     """Its new points are advanced by whichever rank takes its tasks: that rank is the same for
     every batch of a pair (one catch-up, not one per rank) and turns from pair to pair; the other
     set's tasks turn every batch as before."""
-    from types import SimpleNamespace
+    from integrators.service.tasks import Tasks
     scene = parse_scene(SCENE.replace("refine_to = 961\n", ""))       # the loop refines, the surface not
     for size in (2, 3):
-        st = driver._Stream(SimpleNamespace(size=size, rank=0), scene, None, None, {}, 1e-10)
+        st = Tasks(scene, size, 1e-10)
         for k in range(size):
             loop_owner = {st.owners(j, k)[("I1", "canonical")] for j in range(2 * size)}
             surface_owner = {st.owners(j, k)[("I2", "canonical")] for j in range(2 * size)}

@@ -327,9 +327,9 @@ def test_plots_are_written(tmp_path):
 
 
 def test_split_gives_rank0_less_work_by_its_output_cost():
-    from integrators.service.ranks import _split
+    from integrators.service.ranks import split
     for n, size, off in [(12000, 2, 800.0), (12000, 3, 800.0), (1001, 4, 37.0), (176, 2, 0.0)]:
-        blocks = _split(n, size, off)
+        blocks = split(n, size, off)
         assert blocks[0][0] == 0 and blocks[-1][1] == n
         assert all(a[1] == b[0] for a, b in zip(blocks, blocks[1:]))        # contiguous, no gaps
         sizes = [hi - lo for lo, hi in blocks]
@@ -338,37 +338,37 @@ def test_split_gives_rank0_less_work_by_its_output_cost():
         # rank 0 takes `off` points fewer than each other rank (to rounding)
         assert abs((np.mean(others) - sizes[0]) - off) <= 1
     # a huge output cost leaves rank 0 a quarter of an even share, not nothing
-    assert _split(1000, 2, 1e9)[0] == (0, 125)
-    assert _split(5, 1, 3.0) == [(0, 5)]
+    assert split(1000, 2, 1e9)[0] == (0, 125)
+    assert split(5, 1, 3.0) == [(0, 5)]
 
 
 def test_split_by_measured_speed_makes_every_rank_finish_together():
-    from integrators.service.ranks import _balance, _split
+    from integrators.service.ranks import balance, split
     rng = np.random.default_rng(3)
     for size in (2, 3, 5):
         for _ in range(20):
             n = int(rng.integers(1000, 50000))
             c = rng.uniform(1.0, 1.9, size) * 1e-4              # seconds per point, within 2x of each other
             S = rng.uniform(0.0, 0.05) * c[0] * n / size        # rank 0's output seconds
-            blocks = _split(n, size, S / c[0], 1 / c)
+            blocks = split(n, size, S / c[0], 1 / c)
             sizes = np.array([hi - lo for lo, hi in blocks])
             assert blocks[0][0] == 0 and blocks[-1][1] == n and sizes.sum() == n
             finish = c * sizes + np.r_[S, np.zeros(size - 1)]
             # equal finishing times up to one point's rounding on each side
             assert np.ptp(finish) <= 2 * c.max() + 1e-12
-    # _balance turns one pair's per-rank (advance seconds, points, output seconds) into the same inputs
-    off, speed = _balance([(6.0, 3000, 0.6), (9.0, 3000, 0.3)])
+    # balance turns one pair's per-rank (advance seconds, points, output seconds) into the same inputs
+    off, speed = balance([(6.0, 3000, 0.6), (9.0, 3000, 0.3)])
     assert off.tolist() == [0.6 * 500.0, 0.3 * (3000 / 9.0)] and speed == [500.0, 1000.0 / 3]
-    assert _balance([(6.0, 3000, 0.6), (0.0, 0, 0.0)])[1] is None        # a rank without points: even speeds
+    assert balance([(6.0, 3000, 0.6), (0.0, 0, 0.0)])[1] is None        # a rank without points: even speeds
     # output work on every rank: each finishes together with its own share
     for size in (2, 3, 4):
         c = np.linspace(1.0, 1.6, size) * 1e-4
         S = np.linspace(0.3, 0.05, size)
-        blocks = _split(20000, size, S / c, 1 / c)
+        blocks = split(20000, size, S / c, 1 / c)
         sizes = np.array([hi - lo for lo, hi in blocks])
         assert sizes.sum() == 20000 and np.ptp(c * sizes + S) <= 2 * c.max() + 1e-12
     # a wildly slow measurement counts as half the median speed, not less
-    assert _split(9000, 3, 0.0, [1.0, 1.0, 1e-6]) == _split(9000, 3, 0.0, [1.0, 1.0, 0.5])
+    assert split(9000, 3, 0.0, [1.0, 1.0, 1e-6]) == split(9000, 3, 0.0, [1.0, 1.0, 0.5])
 
 
 def test_invariant_tasks_are_spread_over_the_ranks():
@@ -394,11 +394,11 @@ def test_task_owners_rotate_over_the_batches():
     """Batch j's owners are the assignment turned by j ranks: each batch's loads are the assignment's
     (the same multiset), and over any R consecutive batches every rank runs every task once, so the
     largest task is no rank's every batch (issue: MPI without the ceiling)."""
-    from types import SimpleNamespace
+    from integrators.service.tasks import Tasks
     from integrators.service.diagnostics import assign_sets
     scene = parse_scene(SMALL)
     for size in (1, 2, 3, 5, 8, 16):
-        st = driver._Stream(SimpleNamespace(size=size, rank=0), scene, None, None, {}, 1e-10)
+        st = Tasks(scene, size, 1e-10)
         base = assign_sets(scene, size)
         assert all(base[("I1", f)] == base[("I1", "canonical")] for f in scene.forms)   # a set's forms together
         assert size == 1 or base[("I1", "canonical")] != base[("I2", "canonical")]      # the sets apart

@@ -32,7 +32,7 @@ def assign_sets(scene, size) -> dict:
     """{(invariant, form): rank} with every form of a set on one rank (the sets longest first to the
     least loaded): a rank computes a set's forms together, sharing the transforms of q
     (invariants.forms), which one form per rank would repeat.  The driver turns this by one rank a
-    batch (driver._Stream.owners), so the ranks take the sets in turn and share the work over
+    batch (tasks.Tasks.owners), so the ranks take the sets in turn and share the work over
     batches rather than within one.  Deterministic."""
     load = np.zeros(size)
     out = {}

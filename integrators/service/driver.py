@@ -2,7 +2,7 @@
 
 The sample points (loop first, then the surface row by row) are split into contiguous
 blocks, one per rank; from the second pair on, the blocks are sized from each rank's measured
-advance rate and rank 0's is smaller by the cost of its output work (see ``_split``).  Each rank
+advance rate and rank 0's is smaller by the cost of its output work (see ``ranks.split``).  Each rank
 advances its block with each pair.  At every output each rank keeps the per-point errors of its
 points and its part of each sample set; once a batch of outputs (about two seconds of advancing)
 it sends the sets' parts to the ranks that own their invariant tasks in that batch (a set's forms
@@ -13,6 +13,11 @@ and every rank sends its pieces to rank 0, which appends the rows to the HDF5 fi
 the full integrator state comes with them, as a checkpoint.  Because a point's trajectory does
 not depend on its batch, the file's numbers are bitwise the same for any number of ranks.
 Without mpiexec (or without mpi4py) it runs as a single process.
+
+This module runs the pairs and joins the parts, each with one job (docs/architecture.md, "The
+driver's parts"): :mod:`.transport` (messages between ranks), :mod:`.tasks` (what an output
+computes, and which rank), :mod:`.writer` (rank 0's file), :mod:`.ranks` (who advances which
+points), :mod:`.clocks` (the phases' seconds) and :mod:`.stop` (a stop request, passed in).
 """
 from __future__ import annotations
 
@@ -26,10 +31,14 @@ import numpy as np
 
 from . import output
 from ..engine import Engine, MapEngine, State, march, set_threads
-from .diagnostics import Diagnostics, assign_sets
-from .refine import Refiner, refined_values
+from .clocks import Spent, pair_clock
+from .diagnostics import Diagnostics
+from .ranks import Planner, communicator, default_threads, split
+from .refine import Refiner
 from .stop import StopRequest  # noqa: F401  (run's stop argument; tests make one)
-from .ranks import _balance, _split, communicator, default_threads
+from .tasks import Batch, Output, Tasks
+from .transport import PARTS, PIECES, Transport
+from .writer import Replacement, Writer, close_quietly
 
 
 @dataclasses.dataclass
@@ -79,10 +88,6 @@ class Progress:
 def _interactive():
     """Whether a bar is wanted by default: stderr is a terminal, or this is a notebook kernel."""
     return sys.stderr.isatty() or "ipykernel" in sys.modules
-
-
-def _concat(parts):
-    return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
 
 
 def _check_output(path, resume, force):
@@ -198,7 +203,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
                 target = path
                 if path.exists():
-                    replacing = _Replacement(path.resolve())      # (through a symlink: its target)
+                    replacing = Replacement(path.resolve())      # (through a symlink: its target)
                     target = replacing.new
                 f = output.create(target, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
             for tab, proj in scene.pairs:
@@ -209,7 +214,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
                 output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
             if f is not None:
-                _close_quietly(f)
+                close_quietly(f)
     todo = comm.bcast(todo if rank == 0 else None, root=0)
     if isinstance(todo, Exception):
         if replacing is not None:
@@ -222,7 +227,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     try:
         stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED)
         if replacing is not None:      # the old file goes once the new run has written its first rows
-            stream.started = replacing.commit
+            stream.writer.started = replacing.commit
         jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, todo) if job is not None]
         for i, (tab_name, proj, job) in enumerate(jobs):
             check()
@@ -237,18 +242,18 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         comm.Barrier()
     except output.OutputError:
         if f is not None:
-            _close_quietly(f)
+            close_quietly(f)
         if replacing is not None:
             replacing.abandon()
         raise
     except (OSError, RuntimeError) as exc:      # h5py raises RuntimeError for some failed writes
         if f is not None:
-            _close_quietly(f)
+            close_quietly(f)
         raise output.OutputError(f"writing '{path}' failed: {output.plain_error(exc)}; every output before "
                                  "the failure is in the file (free space, then --resume)") from None
     except BaseException:
         if f is not None:
-            _close_quietly(f)
+            close_quietly(f)
         if replacing is not None:
             replacing.abandon()
         raise
@@ -263,38 +268,6 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     for s_ in summaries:
         s_.timings = timings.get(s_.pair, {})
     return summaries
-
-
-class _Replacement:
-    """``--force`` over an existing file: the new run writes ``.NAME.PID.new`` beside it, which
-    replaces the old file (an atomic rename) once its first rows are written; a run that stops
-    before that removes its new file and leaves the old one as it was."""
-
-    def __init__(self, path):
-        self.path, self.new, self.done = path, path.with_name(f".{path.name}.{os.getpid()}.new"), False
-
-    def commit(self):
-        if not self.done:
-            os.replace(self.new, self.path)
-            self.done = True
-
-    def abandon(self):
-        if not self.done:
-            try:
-                os.remove(self.new)
-            except OSError:
-                pass
-
-
-def _close_quietly(f):
-    try:
-        f.flush()
-    except Exception:
-        pass
-    try:
-        f.close()
-    except Exception:
-        pass
 
 
 def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_next, bar, check):
@@ -313,13 +286,12 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
             return Engine(system, scene.tableau(tab_name), proj, h)
         s_tab = scene.tableau(tab_name).s
     engine = make_engine()
-    clock = {"advance": 0.0, "gather": 0.0, "invariants": 0.0, "hdf5": 0.0, "wait_plan": 0.0, "wait_gather": 0.0,
-             "wait_recv": 0.0, "refine": 0.0, "refine_point_steps": 0, "batches": 0}
+    clock = pair_clock()
     w0 = time.perf_counter()
     if first:                                  # the run's first pair: an even split, batches from its first interval
-        plan = (comm.bcast(_split(n, size) if rank == 0 else None, root=0), None, None)
+        plan = (comm.bcast(split(n, size) if rank == 0 else None, root=0), None, None)
     else:
-        plan = stream.receive_plan()
+        plan = stream.planner.receive(rank, stream.transport)
     clock["wait_plan"] = clock["gather"] = time.perf_counter() - w0
     blocks, batch, cadence = plan
     lo, hi = blocks[rank]
@@ -330,11 +302,11 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
     t_start = time.perf_counter()
     pair = _Pair(name, (lo, hi), Diagnostics(scene, system, q0[lo:hi]), clock, batch or 1, cadence or 1, t_start,
-                 dict(stream.spent), start_step, (start_step + scene.steps) // 2,
+                 stream.spent.snapshot(), start_step, (start_step + scene.steps) // 2,
                  refiners={spec.name: Refiner(spec, make_engine, scene.base, h, scene.output_every, check)
                            for spec, _ in scene.sample_sets if spec.levels})
     if rank == 0:
-        pair.g = output.pair_group(stream.f, name)
+        pair.g = output.pair_group(stream.writer.f, name)
         wall0 = output.wall_clock(pair.g)
         pair.wall = lambda: wall0 + (pair.t_end or time.perf_counter()) - t_start
     final = last_checkpoint_step(scene.steps, scene.output_every)
@@ -353,8 +325,8 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
                 (_batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
                 if rank == 0 else None, root=0)
         if rank == 0 and has_next:     # sent from about the pair's middle (_Stream.plan_next)
-            stream.next_pair = (n, _batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
-        stream.charge(clock, "gather", time.perf_counter() - w0)
+            stream.planner.next_pair = (n, _batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+        stream.spent.charge(clock, "gather", time.perf_counter() - w0)
 
     def on_output(step):
         j = (step - start_step) // scene.output_every
@@ -411,19 +383,6 @@ def _cadence(seconds_per_output, checkpoint_seconds) -> int:
 
 
 LAG = 2                              # batches a task owner may hold before it waits for another rank's parts
-PARTS_TAG, OUTPUT_TAG, PLAN_TAG = 5, 7, 9
-
-
-@dataclasses.dataclass
-class _Output:
-    """What a rank keeps of one output until its batch's tasks have run: its points' errors, its
-    part of each sample set (q, p, λ, live), and what rank 0 writes of its points."""
-
-    step: int
-    checkpoint: bool
-    errors: dict
-    parts: list
-    piece: dict
 
 
 @dataclasses.dataclass
@@ -433,11 +392,11 @@ class _Pair:
     name: str
     block: tuple                    # (lo, hi): the rows this rank advances
     diagnostics: Diagnostics
-    clock: dict                     # this rank's seconds in each phase of the pair
+    clock: dict                     # this rank's seconds in each phase of the pair (clocks.pair_clock)
     batch: int                      # outputs a batch
     cadence: int                    # outputs between checkpoints
     t_start: float
-    spent0: dict                    # the rank's seconds outside the advance (_Stream.spent) when the pair began
+    spent0: dict                    # the rank's seconds outside the advance (clocks.Spent) when the pair began
     start: int                      # the step the pair began at on this run
     middle: int                     # from this step on, rank 0 may send the next pair's plan
     held: list = dataclasses.field(default_factory=list)
@@ -449,16 +408,11 @@ class _Pair:
     breakdown_written: np.ndarray | None = None               # rank 0: the breakdown times in the file
 
 
-@dataclasses.dataclass
-class _Batch:
-    pair: _Pair
-    held: list                      # an _Output per output
-    last: bool                      # the pair's last batch
-    index: int = 0                  # its place among the run's batches (whose turn each task is)
-
-
 class _Stream:
-    """One rank's outputs over the whole run, handed on without making the ranks meet.
+    """One rank's outputs over the whole run, handed on without making the ranks meet; the parts
+    it joins: :class:`Transport` (messages), :class:`Tasks` (what an output computes, and who),
+    :class:`Writer` (rank 0's file), :class:`Planner` (who advances which points), :class:`Spent`
+    (clocks).
 
     The outputs of a pair are taken in batches (:func:`_batch`: about two seconds of advancing; a
     batch also ends at a checkpoint and at the pair's last output).  At a batch's end a rank sends
@@ -469,85 +423,41 @@ class _Stream:
     pieces of the batch to rank 0, which writes the batches in order as they become complete.  So a
     rank that is slower for a batch or two costs the others nothing; only drift over more than
     :data:`LAG` batches, or about half a pair, makes a rank wait.  Rank 0 sends the next pair's
-    split from about the middle of a pair (:meth:`plan_next`), sized from the ranks' rates on it,
-    which come with their pieces.
+    split from about the middle of a pair, sized from the ranks' rates on it, which come with their
+    pieces.
     """
 
     def __init__(self, comm, scene, f, after_output, timings, threshold):
-        self.comm, self.scene, self.f = comm, scene, f
-        self.after_output, self.timings, self.threshold = after_output, timings, threshold
-        self.tasks = assign_sets(scene, comm.size)   # turned by one rank a batch: owners()
-        self.refining = {spec.invariant for spec, _ in scene.sample_sets if spec.levels}
-        self.order = {output.pair_name(t, p): k for k, (t, p) in enumerate(scene.pairs)}
+        self.comm, self.scene = comm, scene
+        self.transport = Transport(comm)
+        self.tasks = Tasks(scene, comm.size, threshold)
+        self.spent = Spent()
+        self.planner = Planner(comm.size)
+        self.writer = Writer(f, scene, self.spent, after_output, timings, threshold) if comm.rank == 0 else None
         self.batches = 0                   # batches closed so far, any pair's: the same count on every rank
-        self.pending, self.writing, self.sending = [], [], []
-        self.balance = (0.0, None)         # rank 0: (offload, speed) of the latest pair with every rank's clocks
-        self.plan = None
-        self.next_pair = None              # rank 0: (points, batch, cadence) of the next pair, until its plan is sent
+        self.pending, self.writing = [], []
         self.current = None                # the pair this rank advances
-        self.rates = {}                    # rank 0: {rank: (pair, rates)}: the latest each rank sent
-        self.spent = {"invariants": 0.0, "hdf5": 0.0, "gather": 0.0}   # seconds outside the advance, any pair's
-        self.started = None                # rank 0, --force: called once the first rows are written
-
-    def owners(self, j, k=0):
-        """{(invariant, form): rank} of batch ``j`` of the run's ``k``-th pair: the assignment
-        (:func:`assign_sets`: a set's forms on one rank, longest set first to the least loaded)
-        turned by j ranks, so that over any R consecutive batches every rank runs every task once:
-        the largest task bounds how late a batch's values come, not how many outputs a second the
-        ranks get through (docs/benchmarks.md, "Distributed output").  A set that refines itself
-        turns by pair instead (k ranks): its new points are advanced by the rank that takes its
-        tasks (integrators.service.refine), once a pair rather than once per rank.  A task is the
-        same function of the same points on any rank: no bit changes."""
-        size, refining = self.comm.size, self.refining
-        return {key: (r + (k if key[0] in refining else j)) % size for key, r in self.tasks.items()}
-
-    def needs(self, j, k=0):
-        """{owner: [set index]} of batch ``j`` of the ``k``-th pair: which ranks need which sets' parts."""
-        own = self.owners(j, k)
-        sets = list(enumerate(s for s, _ in self.scene.sample_sets))
-        return {o: [k for k, spec in sets if any(own[(spec.invariant, fm)] == o for fm in self.scene.forms)]
-                for o in sorted(set(own.values()))}
-
-    def others(self, j, k=0):
-        """The ranks whose parts of batch ``j`` (of the ``k``-th pair) this rank waits for (none
-        unless it owns a task)."""
-        rank = self.comm.rank
-        return [r for r in range(self.comm.size) if r != rank] if rank in self.needs(j, k) else []
-
-    def charge(self, clock, phase, seconds):
-        """Book seconds of output work or exchange to a pair's clock and to the rank's running total."""
-        clock[phase] += seconds
-        self.spent[phase] += seconds
 
     def rates_of(self, pair):
         """(seconds advancing, points, seconds of output work), each a step, of this rank since it
-        began ``pair`` (as :func:`_balance` takes them): the other pairs' lagged tasks and rows
-        count as work done meanwhile, not as advance."""
-        d = {k: v - pair.spent0[k] for k, v in self.spent.items()}
-        work, steps = d["invariants"] + d["hdf5"], max(pair.at - pair.start, 1)
-        return (time.perf_counter() - pair.t_start - work - d["gather"]) / steps, pair.block[1] - pair.block[0], \
-            work / steps
+        began ``pair`` (as ranks.balance takes them)."""
+        return self.spent.rates(pair.spent0, pair.t_start, pair.at - pair.start, pair.block[1] - pair.block[0])
 
     # -- a rank's batches -------------------------------------------------------------------------
     def take(self, pair, st, step, checkpoint, flush, last=False):
         """Keep this output's errors and parts (copies: the state moves on); with ``flush`` (always
         with ``checkpoint``), hand the batch on."""
         t0 = time.perf_counter()
-        lo, hi = pair.block
         pair.at = step
-        mine = (st.q, st.p, st.Lam / self.scene.h, st.live)
-        parts = []
-        for _, rows in self.scene.sample_sets:
-            a, b = max(lo, rows.start), min(hi, rows.stop)
-            parts.append(tuple(np.array(x[max(a - lo, 0):max(b - lo, 0)]) for x in mine))
+        parts = self.tasks.parts(pair.block, st)
         flush = flush or checkpoint
         if checkpoint:           # a batch's last output: copied, the state moves on before rank 0 writes it
             piece = {k: np.array(v) for k, v in st.checkpoint().items()}
         else:                    # what rows need of the points (breakdown times only at a batch's end)
             piece = ({"breakdown_time": st.breakdown_time.copy()} if flush else {}) | \
                 ({"q": st.q.copy()} if self.scene.store_points else {})
-        pair.held.append(_Output(step, checkpoint, pair.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
-        self.charge(pair.clock, "invariants", time.perf_counter() - t0)
+        pair.held.append(Output(step, checkpoint, pair.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
+        self.spent.charge(pair.clock, "invariants", time.perf_counter() - t0)
         if flush:
             self.close_batch(pair, step, last)
 
@@ -556,158 +466,77 @@ class _Stream:
         comm, t0 = self.comm, time.perf_counter()
         held, pair.held = pair.held, []
         j, self.batches = self.batches, self.batches + 1
-        for o, sets in self.needs(j, self.order[pair.name]).items():
-            if o != comm.rank:         # pickled at once: the state may move on while the message travels
-                self.sending.append(comm.isend({k: [x.parts[k] for x in held] for k in sets}, dest=o, tag=PARTS_TAG))
+        batch = Batch(pair, held, last, j)
+        for o, sets in self.tasks.needs(*self.tasks.of(batch)).items():
+            if o != comm.rank:
+                self.transport.send({k: [x.parts[k] for x in held] for k in sets}, o, PARTS)
         self.current = pair
-        self.pending.append(_Batch(pair, held, last, j))
-        self.sending = [r for r in self.sending if not r.Test()]
-        self.charge(pair.clock, "gather", time.perf_counter() - t0)
+        self.pending.append(batch)
+        self.transport.settle()
+        self.spent.charge(pair.clock, "gather", time.perf_counter() - t0)
         pair.clock["batches"] += 1
         self.work(block=False)
         if comm.rank == 0:
             self.write_ready(block=False)
-            self.plan_next(pair, step, last)
+            self.planner.maybe_send(pair.name, pair.middle, step, last, lambda: self.rates_of(pair), self.transport)
 
     def _ready(self):
         """Whether every other rank's parts of the oldest queued batch have arrived (a rank's parts
         come in its batches' order, and only for the batches whose tasks this rank owns)."""
-        b = self.pending[0]
-        return all(self.comm.iprobe(source=r, tag=PARTS_TAG) for r in self.others(b.index, self.order[b.pair.name]))
+        return self.transport.arrived(self.tasks.others(self.comm.rank, *self.tasks.of(self.pending[0])), PARTS)
 
     def work(self, block):
         """Run the tasks of the queued batches in order: those whose parts are here; with ``block``,
         or while more than LAG are queued, waiting for the parts."""
         while self.pending and (block or len(self.pending) > LAG or self._ready()):
-            self._tasks(self.pending.pop(0))
+            self._run_tasks(self.pending.pop(0))
 
-    def _tasks(self, b):
-        comm, scene, rank, clock = self.comm, self.scene, self.comm.rank, b.pair.clock
+    def _run_tasks(self, b):
+        rank, clock = self.comm.rank, b.pair.clock
         t0 = time.perf_counter()
-        got = {}
-        k_pair = self.order[b.pair.name]
-        for r in self.others(b.index, k_pair):
-            got[r] = comm.recv(source=r, tag=PARTS_TAG)      # parts[k][i]: set k at the batch's i-th output
+        got = {r: self.transport.receive(r, PARTS) for r in self.tasks.others(rank, *self.tasks.of(b))}
         wait = time.perf_counter() - t0
-        values = [{} for _ in b.held]
-        own = self.owners(b.index, k_pair)
-        for k in self.needs(b.index, k_pair).get(rank, []):
-            spec = scene.sample_sets[k][0]
-            forms = [fm for fm in scene.forms if own[(spec.invariant, fm)] == rank]
-            for i, v in enumerate(values):
-                parts = [got[r][k][i] if r != rank else b.held[i].parts[k] for r in range(comm.size)]
-                q, p, lam, live = (np.concatenate([x[c] for x in parts]) for c in range(4))
-                shp = spec.grid + (q.shape[1],)
-                args = (spec, forms, q.reshape(shp), p.reshape(shp), lam.reshape(shp), live.reshape(spec.grid))
-                if spec.levels:       # a set that refines itself: the coarsest level that resolves it
-                    v.update(refined_values(b.pair.diagnostics, b.pair.refiners[spec.name], *args,
-                                            b.held[i].step, self.threshold))
-                else:
-                    v.update(b.pair.diagnostics.set_values(*args[:5], live))
+        values = self.tasks.run(rank, b, got)      # parts[k][i]: set k at the batch's i-th output
         mine = [(x.errors, v, x.piece) for x, v in zip(b.held, values)]
         t1 = time.perf_counter()
         refine = sum(r.seconds for r in b.pair.refiners.values())
         clock["refine_point_steps"] = sum(r.point_steps for r in b.pair.refiners.values())
         spent, clock["refine"] = refine - clock["refine"], refine
-        self.charge(clock, "invariants", t1 - t0 - wait - spent)
+        self.spent.charge(clock, "invariants", t1 - t0 - wait - spent)
         clock["wait_gather"] += wait
-        self.charge(clock, "gather", wait)
+        self.spent.charge(clock, "gather", wait)
         if rank == 0:
             self.writing.append((b, mine))
             return
         if b.last:
             clock["points"] = b.pair.block[1] - b.pair.block[0]
         rates = (self.current.name, self.rates_of(self.current))
-        self.sending.append(comm.isend((mine, rates, dict(clock) if b.last else None), dest=0, tag=OUTPUT_TAG))
-        self.charge(clock, "gather", time.perf_counter() - t1)
+        self.transport.send((mine, rates, dict(clock) if b.last else None), 0, PIECES)
+        self.spent.charge(clock, "gather", time.perf_counter() - t1)
 
-    # -- rank 0: the plan of the next pair, and the file ------------------------------------------
-    def plan_next(self, pair, step, last):
-        """Rank 0: send the next pair's (blocks, batch, cadence) to every rank without waiting, once
-        past the pair's middle with every rank's rates on this pair (at its last batch in any case).
-        The blocks follow those rates (:func:`_split`), else the latest finished pair's."""
-        if self.next_pair is None or step < pair.middle:
-            return
-        sent = (self.rates.get(r, (None, None)) for r in range(1, self.comm.size))
-        rates = [self.rates_of(pair)] + [x for name, x in sent if name == pair.name]
-        if len(rates) < self.comm.size and not last:
-            return
-        n, batch, cadence = self.next_pair
-        balance = _balance(rates) if len(rates) == self.comm.size else (0.0, None)
-        balance = balance if balance[1] is not None else self.balance
-        self.plan, self.next_pair = (_split(n, self.comm.size, *balance), batch, cadence), None
-        for r in range(1, self.comm.size):
-            self.sending.append(self.comm.isend(self.plan, dest=r, tag=PLAN_TAG))
-
-    def receive_plan(self):
-        """This rank's copy of the plan rank 0 sent for the pair it begins (waits only if rank 0 has not sent it)."""
-        return self.plan if self.comm.rank == 0 else self.comm.recv(source=0, tag=PLAN_TAG)
-
+    # -- rank 0: the file ---------------------------------------------------------------------------
     def write_ready(self, block):
         """Rank 0: write the queued batches in order, each once every rank's pieces of it are here
         (with ``block``, waiting for them)."""
-        comm = self.comm
-        while self.writing and (block or all(comm.iprobe(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size))):
+        others = range(1, self.comm.size)
+        while self.writing and (block or self.transport.arrived(others, PIECES)):
             b, mine = self.writing.pop(0)
             w0 = time.perf_counter()
-            msgs = [comm.recv(source=r, tag=OUTPUT_TAG) for r in range(1, comm.size)]
+            msgs = [self.transport.receive(r, PIECES) for r in others]
             wait = time.perf_counter() - w0
-            self.rates.update((r, m[1]) for r, m in zip(range(1, comm.size), msgs))
+            self.planner.rates.update((r, m[1]) for r, m in zip(others, msgs))
             b.pair.clock["wait_recv"] += wait
-            self.charge(b.pair.clock, "gather", wait)
-            self.write(b, [mine] + [m[0] for m in msgs])
+            self.spent.charge(b.pair.clock, "gather", wait)
+            self.writer.write(b, [mine] + [m[0] for m in msgs])
             if b.last:
-                self.finish_pair(b.pair, [m[2] for m in msgs])
-
-    def write(self, b, batches):
-        """Rank 0: the batch's rows from every rank's (errors, values, piece) at each output, written
-        together and flushed; the breakdown times when they changed, the state at a checkpoint."""
-        scene, pair, t0 = self.scene, b.pair, time.perf_counter()
-        rows = []
-        for i, x in enumerate(b.held):
-            parts = [r[i] for r in batches]
-            rows.append(pair.diagnostics.combine(x.step * scene.h, [p[0] for p in parts],
-                                                 {k: v for p in parts for k, v in p[1].items()}))
-            if scene.store_points:
-                q = np.concatenate([p[2]["q"] for p in parts])
-                for spec, sl in scene.sample_sets:
-                    rows[-1][f"points/{spec.name}"] = q[sl].reshape(spec.grid + (q.shape[1],))
-        last = b.held[-1]
-        full = _concat([r[-1][2] for r in batches])
-        bt = full["breakdown_time"]
-        changed = pair.breakdown_written is None or not np.array_equal(bt, pair.breakdown_written)
-        t1 = time.perf_counter()
-        output.wall_clock(pair.g, pair.wall())
-        output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None, full if last.checkpoint else None)
-        pair.breakdown_written = bt
-        if self.started is not None:
-            self.started()
-            self.started = None
-        self.charge(pair.clock, "invariants", t1 - t0)
-        self.charge(pair.clock, "hdf5", time.perf_counter() - t1)
-        if self.after_output is not None:
-            for x in b.held:
-                self.after_output(pair.name, x.step)
-
-    def finish_pair(self, pair, clocks):
-        """Rank 0, once a pair's last rows are written: its status, its clocks (every rank's, for the
-        cost model, scripts/scaling.py) and the balance of the pairs to come."""
-        clock = pair.clock
-        clocks = [dict(clock, points=pair.block[1] - pair.block[0])] + clocks
-        clock["per_rank"] = clocks
-        self.timings[pair.name] = clock
-        output.wall_clock(pair.g, pair.wall())
-        output.close_pair(pair.g, self.scene.n_outputs, self.threshold)
-        self.f.flush()
-        self.balance = _balance([(c["advance"], c["points"], c["invariants"] + c["hdf5"]) for c in clocks])
+                self.planner.after_pair(self.writer.finish_pair(b.pair, [m[2] for m in msgs]))
 
     def drain(self):
         """At the run's end: every queued task run, every batch written, every message delivered."""
         self.work(block=True)
         if self.comm.rank == 0:
             self.write_ready(block=True)
-        while self.sending:
-            self.sending.pop().wait()
+        self.transport.finish()
 
 
 def finalize(path, scene):

@@ -1,7 +1,10 @@
-"""Ranks and threads: the communicator, threads per rank, and the split of the points over the ranks.
+"""Ranks and balance: the communicator, threads per rank, and who advances which points.
 
 A point's trajectory does not depend on its batch, so any split gives the same numbers; the split
-only decides how long each rank takes to reach the next output.
+only decides how long each rank takes to reach the next output.  The first pair is split evenly;
+each later one by the ranks' measured rates on the pair before it (:func:`balance`,
+:func:`split`), planned by rank 0 from about the middle of that pair and sent without a meeting
+(:class:`Planner`).
 """
 from __future__ import annotations
 
@@ -38,7 +41,7 @@ def communicator():
     return comm if comm.Get_size() > 1 else _Serial()
 
 
-def _split(n, size, offload=0.0, speed=None):
+def split(n, size, offload=0.0, speed=None):
     """Contiguous blocks of n points, one per rank: [(lo, hi), ...].
 
     Besides advancing its points, each rank has output work at every output: its share of the
@@ -80,8 +83,8 @@ def _split(n, size, offload=0.0, speed=None):
     return [(int(bounds[k]), int(bounds[k + 1])) for k in range(size)]
 
 
-def _balance(stats):
-    """(offload, speed) for the next pair's ``_split`` from this pair's per-rank (advance seconds,
+def balance(stats):
+    """(offload, speed) for the next pair's :func:`split` from this pair's per-rank (advance seconds,
     points, output-work seconds)."""
     speed = np.array([pts / adv if adv > 0 and pts > 0 else np.nan for adv, pts, _ in stats])
     if not np.all(np.isfinite(speed)):
@@ -95,3 +98,41 @@ def default_threads(comm) -> int:
     every rank counts as local)."""
     local = int(os.environ.get("MPI_LOCALNRANKS", comm.size) or comm.size)
     return max(1, (os.cpu_count() or 1) // max(1, local))
+
+
+class Planner:
+    """Rank 0's plan of the next pair, (blocks, batch, cadence), sent to every rank without waiting
+    once past the running pair's middle with every rank's rates on it (at its last batch in any
+    case).  The blocks follow those rates (:func:`split`), else the latest finished pair's."""
+
+    def __init__(self, size):
+        self.size = size
+        self.balance = (0.0, None)     # (offload, speed) of the latest pair with every rank's clocks
+        self.plan = None
+        self.next_pair = None          # (points, batch, cadence) of the next pair, until its plan is sent
+        self.rates = {}                # {rank: (pair name, rates)}: the latest each rank sent
+
+    def maybe_send(self, pair, middle, step, last, own_rates, transport):
+        """Send the next pair's plan if it is due (``own_rates``: a callable giving rank 0's rates)."""
+        from .transport import PLAN
+        if self.next_pair is None or step < middle:
+            return
+        sent = (self.rates.get(r, (None, None)) for r in range(1, self.size))
+        rates = [own_rates()] + [x for name, x in sent if name == pair]
+        if len(rates) < self.size and not last:
+            return
+        n, batch, cadence = self.next_pair
+        bal = balance(rates) if len(rates) == self.size else (0.0, None)
+        bal = bal if bal[1] is not None else self.balance
+        self.plan, self.next_pair = (split(n, self.size, *bal), batch, cadence), None
+        for r in range(1, self.size):
+            transport.send(self.plan, r, PLAN)
+
+    def after_pair(self, clocks):
+        """A finished pair's clocks (every rank's): the balance to fall back on."""
+        self.balance = balance([(c["advance"], c["points"], c["invariants"] + c["hdf5"]) for c in clocks])
+
+    def receive(self, rank, transport):
+        """This rank's copy of the plan for the pair it begins (waits only if rank 0 has not sent it)."""
+        from .transport import PLAN
+        return self.plan if rank == 0 else transport.receive(0, PLAN)

@@ -1,0 +1,40 @@
+"""Transport: the messages between ranks during a run, and nothing else.
+
+Three kinds, each with its tag: a batch's parts of the sample sets (to the ranks that take the
+sets' tasks), a batch's pieces (errors, task values, points' states: to rank 0, which writes
+them), and the next pair's plan (from rank 0).  Every send is non-blocking and pickles at once,
+so the sender's arrays may change while the message travels; a receive waits, and
+:meth:`Transport.arrived` asks without waiting.  On one process nothing is sent.
+"""
+from __future__ import annotations
+
+PARTS, PIECES, PLAN = 5, 7, 9          # message tags
+
+
+class Transport:
+    """Non-blocking sends and probed receives over ``comm`` (MPI.COMM_WORLD or the serial stand-in)."""
+
+    def __init__(self, comm):
+        self.comm = comm
+        self.sending = []              # requests of sends not known to be complete
+
+    def send(self, obj, dest, tag):
+        """Send ``obj`` to rank ``dest`` without waiting (pickled now)."""
+        self.sending.append(self.comm.isend(obj, dest=dest, tag=tag))
+
+    def arrived(self, sources, tag) -> bool:
+        """Whether a message with ``tag`` is waiting from every rank in ``sources``."""
+        return all(self.comm.iprobe(source=r, tag=tag) for r in sources)
+
+    def receive(self, source, tag):
+        """The next message with ``tag`` from ``source`` (waits for it)."""
+        return self.comm.recv(source=source, tag=tag)
+
+    def settle(self):
+        """Forget the sends that have completed."""
+        self.sending = [r for r in self.sending if not r.Test()]
+
+    def finish(self):
+        """Wait until every send has completed (at the run's end)."""
+        while self.sending:
+            self.sending.pop().wait()
