@@ -180,6 +180,9 @@ def test_checkpoint_cadence_and_batches_follow_the_measured_interval():
     assert driver._cadence(0.5, 0.0) == 1 and driver._cadence(0.0, 60.0) == 60_000_000
     assert driver._batch(0.25, 1000) == 8 and driver._batch(5.0, 1000) == 1
     assert driver._batch(1e-3, 10**6) == driver.BATCH_BYTES // (128 * 10**6)   # memory, not time, limits it
+    # on many ranks a batch is capped so that the run has about 4 batches a rank for the owners to turn
+    # over: the paper scene's 15 × 101 outputs in batches of 189, 5 and 1 outputs on 2, 64 and 1,024 ranks
+    assert [driver.turns(15 * 101, r) for r in (2, 64, 1024)] == [189, 5, 1]
 
 
 def poincare(*args, n=None, **kw):

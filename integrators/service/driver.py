@@ -320,12 +320,14 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         w0 = time.perf_counter()
         per_output = w0 - t_start
         measured.append(per_output)
+        cap = turns(scene.n_outputs * len(scene.pairs), size)
         if batch is None:
             pair.batch, pair.cadence = comm.bcast(
-                (_batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+                (min(_batch(per_output, hi - lo), cap), _cadence(per_output, scene.checkpoint_seconds))
                 if rank == 0 else None, root=0)
-        if rank == 0 and has_next:     # sent from about the pair's middle (_Stream.plan_next)
-            stream.planner.next_pair = (n, _batch(per_output, hi - lo), _cadence(per_output, scene.checkpoint_seconds))
+        if rank == 0 and has_next:     # sent from about the pair's middle (ranks.Planner)
+            stream.planner.next_pair = (n, min(_batch(per_output, hi - lo), cap),
+                                        _cadence(per_output, scene.checkpoint_seconds))
         stream.spent.charge(clock, "gather", time.perf_counter() - w0)
 
     def on_output(step):
@@ -373,6 +375,17 @@ def _batch(seconds_per_output, points) -> int:
     """Outputs a rank holds before it hands them on: about BATCH_SECONDS of advancing, within BATCH_BYTES."""
     by_time = int(BATCH_SECONDS / max(seconds_per_output, 1e-6))
     return max(1, min(by_time, BATCH_BYTES // (128 * max(points, 1))))
+
+
+TURNS = 4                    # batches a run holds per rank, at least: how evenly the rotation shares the tasks
+
+
+def turns(outputs, ranks) -> int:
+    """The most outputs a batch may hold so that the run has about TURNS batches a rank: the task
+    owners turn by batch (tasks.Tasks.owners), so with fewer batches than ranks some ranks would
+    never take a set's tasks and one batch's owner would take a whole pair's (on many ranks a pair
+    is a few seconds, and two seconds of advancing would be the whole pair)."""
+    return max(1, outputs // (TURNS * ranks))
 
 
 def _cadence(seconds_per_output, checkpoint_seconds) -> int:
