@@ -17,8 +17,16 @@ import numpy as np
 import pyfftw
 from numba import njit
 import scipy.fft
-from chebpy.algorithms import chebpts2
 from numpy.polynomial import chebyshev as C
+
+
+def chebpts2(n: int) -> np.ndarray:
+    """n Chebyshev points of the second kind on [−1, 1], ascending: chebpy's ``chebpts2``, bit for bit
+    (tests/test_invariants.py compares them).  Written here because importing chebpy loads
+    matplotlib.pyplot: 0.43 s of every process's start, on every rank (docs/benchmarks.md)."""
+    if n == 1:
+        return np.array([0.0])
+    return np.cos(np.arange(n)[::-1] * np.pi / (n - 1))
 
 # ----------------------------------------------------------------------------- loops
 

@@ -142,6 +142,12 @@ def test_resolution_monitor_flags_an_under_resolved_loop():
     assert not invariants.first_invariant(invariants.loop("guiding_centre", 64), "noncanonical", system=GC).under_resolved
 
 
+def test_chebyshev_points_are_chebpys_bit_for_bit():
+    from chebpy.algorithms import chebpts2
+    for n in list(range(1, 40)) + [100, 185, 913]:
+        assert np.array_equal(spectral.chebpts2(n), chebpts2(n)), n
+
+
 def test_dct_matches_chebpy_and_weights_integrate_polynomials(rng):
     from chebpy.algorithms import vals2coeffs2
     v = rng.standard_normal(17)
