@@ -154,6 +154,19 @@ def measure(steps, hybrid=False, again=None):
         res.update(costs())
         OUT.write_text(json.dumps(res, indent=1))
         return
+    if again == "1x1-busy":       # one rank with the other core kept busy: the 2-rank run's per-core speed
+        res = json.loads(OUT.read_text())
+        hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                run = bs.measure(bs.scene_text("p", steps, **PAIRS), 1, tmp, out_name="busy.h5", threads=1)
+        finally:
+            hog.kill()
+        run["measured"] = time.strftime("%Y-%m-%d %H:%M") + " by python scripts/scaling.py measure --again 1x1-busy"
+        res.setdefault("1x1-busy", []).append(run)
+        print(again, run["wall"], flush=True)
+        OUT.write_text(json.dumps(res, indent=1))
+        return
     if again:
         res = json.loads(OUT.read_text())
         res["earlier"] = res.get("earlier", []) + [{again: {"wall": res[again]["wall"],
@@ -456,7 +469,7 @@ def main():
     ap.add_argument("--steps", type=int, default=1000, help="steps of the paper scene (its own: 1,000)")
     ap.add_argument("--hybrid", action="store_true", help="also 1 rank x 2 threads")
     ap.add_argument("--again", help="measure only this run (e.g. 2x1) again, or 'costs' (B and C), keeping the "
-                    "rest of the file")
+                    "rest of the file; '1x1-busy': one rank while another process keeps the second core busy")
     args = ap.parse_args()
     if args.what == "measure":
         measure(args.steps, args.hybrid, args.again)
