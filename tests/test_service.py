@@ -57,6 +57,7 @@ def edit(text, old, new):
     (("[run]", "[run]\ntableaus = 3\n"), "not valid TOML"),
     (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoint_seconds = -1.0\n'), "output.checkpoint_seconds"),
     (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoint_seconds = inf\n'), "output.checkpoint_seconds"),
+    (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoints = "per-node"\n'), "output.checkpoints must be"),
 ])
 def test_bad_scenes_name_the_key(change, msg):
     with pytest.raises(SceneError, match=msg):
@@ -145,6 +146,20 @@ def test_no_surface_means_no_surface_data(tmp_path):
         assert g["breakdown_time"].shape == (64,)
 
 
+def stop_at_output_8(scene, path, monkeypatch):
+    """Run ``scene`` into ``path`` with a state every 3rd output and rows every 2nd, stopped (as by
+    Ctrl-C) after output 8 of pair GLRK2-none: its rows end at 8, its newest state is at 6."""
+    monkeypatch.setattr(driver, "_cadence", lambda seconds_per_output, checkpoint_seconds: 3)
+    monkeypatch.setattr(driver, "_batch", lambda seconds_per_output, points: 2)
+
+    def stop(pair, step):
+        if pair == "GLRK2-none" and step == 32:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        driver.run(scene, path, progress=False, after_output=stop)
+
+
 def test_the_state_is_written_every_few_outputs_and_a_resume_recomputes_the_rows_after_it(tmp_path, monkeypatch):
     """The state goes to the file about every output.checkpoint_seconds, not at every output: with
     the default (60 s) this small run writes it once a pair, at the end.  Forced to every 3rd output,
@@ -157,15 +172,7 @@ def test_the_state_is_written_every_few_outputs_and_a_resume_recomputes_the_rows
     with h5py.File(full) as f:
         for name in f["runs"]:
             assert sorted(int(f["runs"][name][f"checkpoint/{s}/step"][()]) for s in "ab") == [-1, 40], name
-    monkeypatch.setattr(driver, "_cadence", lambda seconds_per_output, checkpoint_seconds: 3)
-    monkeypatch.setattr(driver, "_batch", lambda seconds_per_output, points: 2)
-
-    def stop(pair, step):
-        if pair == "GLRK2-none" and step == 32:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        driver.run(scene, part, progress=False, after_output=stop)
+    stop_at_output_8(scene, part, monkeypatch)
     with h5py.File(part) as f:
         g = f["runs/GLRK2-none"]
         assert g["t"].shape[0] == 9 and g["I2/corrected"].shape[0] == 9
@@ -173,6 +180,35 @@ def test_the_state_is_written_every_few_outputs_and_a_resume_recomputes_the_rows
     driver.run(scene, part, progress=False, resume=True)
     # checkpoints included: a finished pair keeps its final state in slot a, whenever states were written
     assert same(dump(full, skip=("wall_clock",)), dump(part, skip=("wall_clock",)))
+
+
+@pytest.mark.parametrize("first,then", [("per-rank", "per-rank"), ("per-rank", "in-file"), ("in-file", "per-rank")])
+def test_per_rank_checkpoints_resume_to_the_in_file_bits(tmp_path, monkeypatch, first, then):
+    """output.checkpoints = "per-rank": each rank's state is a slab file beside the run file, linked
+    into the checkpoint slots as virtual datasets.  A run stopped after output 8 (states every 3rd
+    output), with a stray slab of another run planted beside it, resumed with either setting: every
+    value of the file, the settled checkpoints read through the links too, is the uninterrupted
+    in-file run's; the folder then holds exactly the slabs the slots link."""
+    from integrators.service import output
+    scene = lambda mode: parse_scene(SMALL.replace('"symmetric", "symplectic"', '"symplectic"')
+                                     + f'[output]\ncheckpoints = "{mode}"\n')
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    driver.run(scene("in-file"), full, progress=False)
+    stop_at_output_8(scene(first), part, monkeypatch)
+    folder = tmp_path / "part.h5.checkpoints"
+    if first == "per-rank":
+        with h5py.File(part) as f:
+            c = f["runs/GLRK2-none/checkpoint/b"]          # the newest state (step 24), linked
+            assert c["q"].is_virtual and int(c["step"][()]) == 24 and output.slot_files(c)[0][1:] == (0, 464)
+        (folder / "GLRK2-none.27.0badf00d.0-464.h5").write_bytes(b"a stopped run's slab, never linked")
+    driver.run(scene(then), part, progress=False, resume=True)
+    assert same(dump(full), dump(part))
+    with h5py.File(part) as f:
+        linked = {n for g in f["runs"].values() for s_ in "ab" for n, _, _ in output.slot_files(g[f"checkpoint/{s_}"])}
+        virtual = {k for k, g in f["runs"].items() if g["checkpoint/a/q"].is_virtual}
+    assert {p.name for p in folder.iterdir()} == linked
+    assert virtual == ({"GLRK1-none", "GLRK1-symplectic"} if first == "per-rank" else set()) \
+        | ({"GLRK2-none", "GLRK2-symplectic"} if then == "per-rank" else set())   # finished before / after the stop
 
 
 def test_checkpoint_cadence_and_batches_follow_the_measured_interval():

@@ -130,7 +130,7 @@ def test_system_from_reads_strings_with_the_restricted_parser(tmp_path, monkeypa
 
 # -- the service: statuses, exit codes, batch safety ---------------------------------------------------
 
-from integrators.service import driver  # noqa: E402
+from integrators.service import driver, output  # noqa: E402
 from integrators.service.cli import main as cli_main  # noqa: E402
 from integrators.service.scene import SceneError, load_scene, parse_scene  # noqa: E402
 
@@ -320,15 +320,22 @@ def test_sigterm_under_mpiexec_stops_every_rank(tmp_path):
 
 
 @pytest.mark.mpi
-def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path):
+@pytest.mark.parametrize("checkpoints", ["in-file", "per-rank"])
+def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path, checkpoints):
     """Kill and resume on a different rank count: the checkpoint holds every point's state whatever
-    split wrote it, and the resumed file's rows are the uninterrupted 1-rank run's, bit for bit."""
+    split wrote it, and the resumed file's rows are the uninterrupted 1-rank run's, bit for bit.
+    Per-rank checkpoints (each rank's slab in its own file beside the run file, linked into it):
+    the same, the final state read through the links is the in-file run's, the folder keeps only the
+    slabs linked (a killed run's unlinked ones are removed), and without the folder the resume is
+    refused in one line naming it while the results still read."""
     import signal
+    text = GC.replace("steps = 40", "steps = 20000").replace("output_every = 4", "output_every = 200") \
+        + "[output]\ncheckpoint_seconds = 0.0\n"
+    (tmp_path / "full.toml").write_text(text)
     scene = tmp_path / "gc.toml"
-    scene.write_text(GC.replace("steps = 40", "steps = 20000").replace("output_every = 4", "output_every = 200")
-                     + "[output]\ncheckpoint_seconds = 0.0\n")
+    scene.write_text(text + f'checkpoints = "{checkpoints}"\n')
     full, part = tmp_path / "full.h5", tmp_path / "part.h5"
-    rc = poincare("run", str(scene), "-o", str(full), "-q").returncode
+    rc = poincare("run", str(tmp_path / "full.toml"), "-o", str(full), "-q").returncode
     proc = subprocess.Popen([str(BIN / "mpiexec"), "-n", "2", str(BIN / "poincare"), "run", str(scene), "-o",
                              str(part), "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert _wait_for_rows(part, "GLRK2-symmetric", 5, proc)
@@ -337,9 +344,24 @@ def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path):
     assert proc.returncode == 143
     with h5py.File(part) as f:
         assert f["runs/GLRK2-symplectic"].attrs["status"] == "pending"
+    folder = tmp_path / "part.h5.checkpoints"
+    if checkpoints == "per-rank":
+        folder.rename(tmp_path / "elsewhere")
+        r = poincare("run", str(scene), "-o", str(part), "-q", "--resume")
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and str(folder) in r.stderr, r.stderr
+        assert integrators.service.read_run(part)["GLRK2-symmetric"].t.size > 0
+        (tmp_path / "elsewhere").rename(folder)
     r = poincare("run", str(scene), "-o", str(part), "-q", "--resume", n=3)
     assert r.returncode == rc, r.stderr
-    skip = ("wall_clock", "checkpoint")
+    skip = ("wall_clock",) if checkpoints == "per-rank" else ("wall_clock", "checkpoint")
+    if checkpoints == "per-rank":
+        with h5py.File(part) as f:
+            slabs = {k: sorted(output.slot_files(g["checkpoint/a"]), key=lambda x: x[1]) for k, g in f["runs"].items()}
+            assert all(f["runs"][k]["checkpoint/a/q"].is_virtual for k in f["runs"])
+        for k, links in slabs.items():              # every point's state, once: the split of the last run
+            assert [lo for _, lo, _ in links] == [0] + [hi for _, _, hi in links[:-1]] and links[-1][2] == 464, k
+            assert len(links) in (2, 3) and all(name.startswith(k + ".20000.") for name, _, _ in links), k
+        assert {p.name for p in folder.iterdir()} == {name for links in slabs.values() for name, _, _ in links}
     with h5py.File(full) as a, h5py.File(part) as b:
         names = []
         a.visit(lambda k: names.append(k) if isinstance(a[k], h5py.Dataset) and not any(x in k for x in skip)

@@ -161,6 +161,10 @@ def cmd_run(args) -> int:
               f"h = {scene.h:g}, {scene.steps} steps, output every {scene.output_every}, "
               f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
               flush=True)
+        if scene.checkpoints == "per-rank":
+            from .output import state_dir
+            print(f"checkpoints: every rank writes its points' state into '{_printable(state_dir(out))}' "
+                  "(keep that folder beside the file to resume it)", flush=True)
         from ..engine import kernel_cached
         if not kernel_cached():
             print("compiling the step engine (once per machine, about a minute on 2 cores; the first pair's wall "

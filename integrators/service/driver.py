@@ -10,7 +10,9 @@ on one rank, the owners turned by one rank a batch: ``_Stream.owners``) and goes
 waiting for anyone (``_Stream``).  A task owner runs a batch's tasks once the parts have arrived,
 and every rank sends its pieces to rank 0, which appends the rows to the HDF5 file in order (see
 :mod:`integrators.service.output`); about every ``output.checkpoint_seconds`` and at a pair's end
-the full integrator state comes with them, as a checkpoint.  Because a point's trajectory does
+the full integrator state comes with them, as a checkpoint (or, with ``output.checkpoints =
+"per-rank"``, each rank writes its state as a file of its own and rank 0 links them: ``write_slab``).
+Because a point's trajectory does
 not depend on its batch, the file's numbers are bitwise the same for any number of ranks.
 Without mpiexec (or without mpi4py) it runs as a single process.
 
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import secrets
 import sys
 import time
 from pathlib import Path
@@ -195,8 +198,16 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     f = None
     todo = []
     replacing = None                   # --force over an existing file: written beside it, renamed over it once started
+    token = secrets.token_hex(4)       # names this run's checkpoint slabs (rank 0's, sent with the pairs to run)
     if rank == 0:
         try:
+            if scene.checkpoints == "per-rank":
+                folder = output.state_dir(path)
+                try:
+                    folder.mkdir(exist_ok=True)
+                except OSError as exc:
+                    raise output.OutputError(f"cannot make the checkpoint folder '{folder}' "
+                                             f"(output.checkpoints = \"per-rank\"): {output.plain_error(exc)}") from None
             if resume:
                 f = output.reopen(path, scene)
             else:
@@ -210,12 +221,14 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
                                                 finished_too=grown_from is not None))
             f.flush()
+            if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
+                output.prune_slabs(f, path, token)
         except (OSError, ValueError) as exc:
             todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
                 output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
             if f is not None:
                 close_quietly(f)
-    todo = comm.bcast(todo if rank == 0 else None, root=0)
+    todo, token = comm.bcast((todo, token) if rank == 0 else None, root=0)
     if isinstance(todo, Exception):
         if replacing is not None:
             replacing.abandon()
@@ -225,9 +238,12 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or _interactive())))
     try:
-        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED)
+        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED, output.state_dir(path), token)
         if replacing is not None:      # the old file goes once the new run has written its first rows
-            stream.writer.started = replacing.commit
+            def started():             # ... and with it the old run's checkpoint slabs
+                replacing.commit()
+                output.prune_slabs(f, path, token)
+            stream.writer.started = started
         jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, todo) if job is not None]
         for i, (tab_name, proj, job) in enumerate(jobs):
             check()
@@ -440,13 +456,16 @@ class _Stream:
     pieces.
     """
 
-    def __init__(self, comm, scene, f, after_output, timings, threshold):
+    def __init__(self, comm, scene, f, after_output, timings, threshold, folder=None, token=""):
         self.comm, self.scene = comm, scene
+        self.slabs = folder if scene.checkpoints == "per-rank" else None     # where each rank writes its state
+        self.token, self.s_max = token, max([scene.tableau(t).s for t in scene.tableaus] + [1])
         self.transport = Transport(comm)
         self.tasks = Tasks(scene, comm.size, threshold)
         self.spent = Spent()
         self.planner = Planner(comm.size)
-        self.writer = Writer(f, scene, self.spent, after_output, timings, threshold) if comm.rank == 0 else None
+        self.writer = Writer(f, scene, self.spent, after_output, timings, threshold, self.slabs) \
+            if comm.rank == 0 else None
         self.batches = 0                   # batches closed so far, any pair's: the same count on every rank
         self.pending, self.writing = [], []
         self.current = None                # the pair this rank advances
@@ -464,7 +483,9 @@ class _Stream:
         pair.at = step
         parts = self.tasks.parts(pair.block, st)
         flush = flush or checkpoint
-        if checkpoint:           # a batch's last output: copied, the state moves on before rank 0 writes it
+        if checkpoint and self.slabs is not None:     # per-rank: this rank's state, written by it now
+            piece = self.write_slab(pair, st, step)
+        elif checkpoint:         # a batch's last output: copied, the state moves on before rank 0 writes it
             piece = {k: np.array(v) for k, v in st.checkpoint().items()}
         else:                    # what rows need of the points (breakdown times only at a batch's end)
             piece = ({"breakdown_time": st.breakdown_time.copy()} if flush else {}) | \
@@ -473,6 +494,21 @@ class _Stream:
         self.spent.charge(pair.clock, "invariants", time.perf_counter() - t0)
         if flush:
             self.close_batch(pair, step, last)
+
+    def write_slab(self, pair, st, step):
+        """output.checkpoints = "per-rank": this rank's points' state at ``step`` as its own file
+        (output.write_slab), and what rank 0 needs to link it: {"slab": [(name, lo, hi)], ...}."""
+        t0 = time.perf_counter()
+        lo, hi = pair.block
+        piece = {"breakdown_time": st.breakdown_time.copy(), "slab": []}
+        if hi > lo:
+            name = output.slab_name(pair.name, step, self.token, lo, hi)
+            output.write_slab(self.slabs, name, st.checkpoint(), self.s_max)
+            piece["slab"] = [(name, lo, hi)]
+        if self.scene.store_points:
+            piece["q"] = st.q.copy()
+        self.spent.charge(pair.clock, "hdf5", time.perf_counter() - t0)
+        return piece
 
     def close_batch(self, pair, step, last):
         """Send the batch's parts to the task owners, queue its tasks, and run (rank 0: write) what is ready."""

@@ -56,6 +56,8 @@ A scene file::
     path = "my-run.h5"
     checkpoint_seconds = 60.0             # write the integrator state about this often (and at each pair's
                                           # end); 0: at every output.  A kill loses at most this much work.
+    checkpoints = "in-file"               # or "per-rank": every rank writes its own points' state beside the
+                                          # file (my-run.h5.checkpoints/), linked into it; for hundreds of ranks
 
 Files named in a scene (tableaus, file.py:function) are looked up next to the scene file, then in
 the current directory.  A scene that names Python code (file.py:function, module:function) runs
@@ -196,6 +198,7 @@ class Scene:
     output: str
     text: str
     checkpoint_seconds: float = CHECKPOINT_SECONDS  # wall time between checkpoints (0: every output); results do not depend on it
+    checkpoints: str = "in-file"     # who writes the state: rank 0 into the file, or every rank its slab beside it
     base: str | None = None          # directory of the scene file: where a relative file.py:function is looked up
     system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
@@ -302,7 +305,7 @@ _SCHEMA = {
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
             "forms": list, "diagnostics": list, "store_points": bool},
-    "output": {"path": str, "checkpoint_seconds": float},
+    "output": {"path": str, "checkpoint_seconds": float, "checkpoints": str},
 }
 RUN_KEYS = tuple(_SCHEMA["run"])      # what integrators.service.run(..., **overrides) may set
 
@@ -446,10 +449,13 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     ck_seconds = float(data.get("output", {}).get("checkpoint_seconds", CHECKPOINT_SECONDS))
     if not (math.isfinite(ck_seconds) and ck_seconds >= 0):
         raise SceneError(f"output.checkpoint_seconds must be a finite number ≥ 0, got {ck_seconds!r}")
+    ck_mode = data.get("output", {}).get("checkpoints", "in-file")
+    if ck_mode not in ("in-file", "per-rank"):
+        raise SceneError(f"output.checkpoints must be \"in-file\" or \"per-rank\", got {ck_mode!r}")
     scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
-                  checkpoint_seconds=ck_seconds,
+                  checkpoint_seconds=ck_seconds, checkpoints=ck_mode,
                   base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps)
     _check_memory(scene, system)
     _check_points(scene, system)

@@ -1,7 +1,8 @@
 """Writer: rank 0's side of the file during a run.
 
 Rank 0 appends each batch's rows once every rank's pieces of it are here, in order, one flush a
-batch; the breakdown times when they changed, the integrator state at a checkpoint; and a pair's
+batch; the breakdown times when they changed, the integrator state at a checkpoint (with
+``output.checkpoints = "per-rank"``, the links to the slabs every rank wrote); and a pair's
 status, growth laws and clocks once its last rows are written (integrators.service.output holds
 the layout and the crash-safe checkpoint).  ``--force`` over an existing file writes beside it and
 replaces it only once the first rows are written (:class:`Replacement`).
@@ -17,14 +18,14 @@ from . import output
 
 
 def concat(parts):
-    return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    return {name: np.concatenate([p[name] for p in parts]) for name in parts[0] if name != "slab"}
 
 
 class Writer:
     """Rank 0's writes of a run into the open file ``f``."""
 
-    def __init__(self, f, scene, spent, after_output, timings, threshold):
-        self.f, self.scene, self.spent = f, scene, spent
+    def __init__(self, f, scene, spent, after_output, timings, threshold, slabs=None):
+        self.f, self.scene, self.spent, self.slabs = f, scene, spent, slabs
         self.after_output, self.timings, self.threshold = after_output, timings, threshold
         self.started = None                # --force: called once the first rows are written
 
@@ -47,7 +48,14 @@ class Writer:
         changed = pair.breakdown_written is None or not np.array_equal(bt, pair.breakdown_written)
         t1 = time.perf_counter()
         output.wall_clock(pair.g, pair.wall())
-        output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None, full if last.checkpoint else None)
+        if self.slabs is None:
+            output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None,
+                              full if last.checkpoint else None)
+        else:                    # per-rank checkpoints: every rank has written its slab; link them
+            output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None)
+            if last.checkpoint:
+                output.link_checkpoint(self.f, pair.g, last.step,
+                                       [x for r in batches for x in r[-1][2]["slab"]], self.slabs)
         pair.breakdown_written = bt
         if self.started is not None:
             self.started()
@@ -66,7 +74,7 @@ class Writer:
         clock["per_rank"] = clocks
         self.timings[pair.name] = clock
         output.wall_clock(pair.g, pair.wall())
-        output.close_pair(pair.g, self.scene.n_outputs, self.threshold)
+        output.close_pair(pair.g, self.scene.n_outputs, self.threshold, self.slabs)
         self.f.flush()
         return clocks
 
