@@ -2,6 +2,7 @@
 
     python scripts/scaling.py measure [--steps 1000] [--hybrid]   # ~17 min on 2 cores: docs/figures/scaling.json
     python scripts/scaling.py measure --again 2x1                 # one run again, the rest of the file kept
+    python scripts/scaling.py measure --again checkpoints         # per-rank checkpoints: costs, 2 ranks side by side
     python scripts/scaling.py predict                 # the model: tables for docs/benchmarks.md and a PNG
 
 measure:
@@ -26,9 +27,9 @@ against A's 1- and 2-rank walls.
 
 predict also runs the batch-by-batch model (:func:`predict_schedule`): the driver's schedule
 itself (batch sizes with the cap of driver.turns, each batch's set tasks on the ranks the rotation
-gives them, rank 0's rows and checkpoints), for the driver as built and for two designs not built
-(checkpoints written by every rank; a set's task split over a group of ranks), strong and weak
-scaling.  That is the model docs/benchmarks.md quotes now; the even-spread one above is kept for
+gives them, rank 0's rows and checkpoints), for the driver as built, with checkpoints written by every rank
+(output.checkpoints = "per-rank", costs from ``--again checkpoints``) and for a design not built
+(a set's task split over a group of ranks), strong and weak scaling.  That is the model docs/benchmarks.md quotes now; the even-spread one above is kept for
 the record of how the first predictions were made.
 """
 import argparse
@@ -116,6 +117,17 @@ def gather_cost(points=12000):
     return dict(bytes=int(nbytes), seconds=float(dt), bytes_per_second=int(nbytes) / float(dt))
 
 
+def _slots(f, schema):
+    """A pair group with two checkpoint slots of ``schema``, as output.create makes them."""
+    g = f.create_group("p")
+    for slot in ("a", "b"):
+        c = g.create_group(f"checkpoint/{slot}")
+        c.create_dataset("step", data=np.array(-1, dtype=np.int64))
+        for name, (shape, dtype) in schema.items():
+            c.create_dataset(name, shape=shape, dtype=dtype, chunks=True, fletcher32=True)
+    return g
+
+
 def write_cost(points=12000, repeat=5):
     """Seconds a byte of one checkpoint of ``points`` points takes to write (as the driver does:
     fletcher32 chunks, slot invalidated, written, validated, three flushes); median of ``repeat``."""
@@ -126,18 +138,79 @@ def write_cost(points=12000, repeat=5):
     state = {k: np.ones(shape, dtype) for k, (shape, dtype) in schema.items()}
     nbytes = sum(v.nbytes for v in state.values())
     with tempfile.TemporaryDirectory() as tmp, h5py.File(Path(tmp) / "w.h5", "w") as f:
-        g = f.create_group("p")
-        for slot in ("a", "b"):
-            c = g.create_group(f"checkpoint/{slot}")
-            c.create_dataset("step", data=np.array(-1, dtype=np.int64))
-            for name, (shape, dtype) in schema.items():
-                c.create_dataset(name, shape=shape, dtype=dtype, chunks=True, fletcher32=True)
+        g = _slots(f, schema)
         ts = []
         for k in range(repeat):
             t0 = time.perf_counter()
             output.write_checkpoint(f, g, k, state)
             ts.append(time.perf_counter() - t0)
     return dict(bytes=nbytes, seconds=float(np.median(ts)), seconds_per_byte=float(np.median(ts)) / nbytes)
+
+
+def slab_cost(points=12000, ranks=2, repeat=5):
+    """Seconds a byte of one rank's checkpoint slab takes to write with output.checkpoints =
+    "per-rank" (output.write_slab: a file of its own, fletcher32 chunks, closed); median of ``repeat``."""
+    from integrators import State
+    from integrators.service import output
+    state = {k: np.ones(shape, dtype) for k, (shape, dtype) in State.schema(points // ranks, 4, 3).items()}
+    nbytes = sum(v.nbytes for v in state.values())
+    ts = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(repeat):
+            t0 = time.perf_counter()
+            output.write_slab(Path(tmp), f"s{k}.h5", state, 3)
+            ts.append(time.perf_counter() - t0)
+    return dict(bytes=nbytes, seconds=float(np.median(ts)), seconds_per_byte=float(np.median(ts)) / nbytes)
+
+
+def link_cost(points=1_000_000, slabs=(16, 128, 1024), repeat=3):
+    """Rank 0's seconds to link one per-rank checkpoint of ``points`` points written as R slabs
+    (output.link_checkpoint: a virtual dataset a field, R mappings each), for each R; and the fit
+    seconds = a + b·R."""
+    import h5py
+    from integrators import State
+    from integrators.service import output
+    schema = State.schema(points, 4, 3)
+    res = {}
+    with tempfile.TemporaryDirectory() as tmp, h5py.File(Path(tmp) / "w.h5", "w") as f:
+        g = _slots(f, schema)
+        folder = Path(tmp) / "w.h5.checkpoints"
+        folder.mkdir()
+        for r in slabs:
+            b = np.linspace(0, points, r + 1).astype(int)
+            links = [(f"{r}-{i}.h5", int(b[i]), int(b[i + 1])) for i in range(r)]
+            ts = []
+            for k in range(repeat):
+                t0 = time.perf_counter()
+                output.link_checkpoint(f, g, k, links, folder)
+                ts.append(time.perf_counter() - t0)
+            res[r] = float(np.median(ts))
+    R = np.array(list(res), float)
+    b, a = np.polyfit(R, np.array(list(res.values())), 1)
+    return dict(seconds=res, fixed=float(a), per_slab=float(b))
+
+
+CK_SCENE = dict(loop=100_000, surf=None, tableaus=("GLRK2",), projections=("symmetric",), forms=("canonical",))
+
+
+def checkpoint_runs(repeat=3, steps=100):
+    """Side by side on 2 ranks: a scene whose checkpoints weigh (a loop of 100,000 points, its state
+    written at every one of its 21 outputs: output.checkpoint_seconds = 0) with the state gathered to
+    rank 0 and written into the file, and with every rank writing its own slab; alternated
+    ``repeat`` times; wall and every rank's HDF5 seconds, and whether the two files hold the same values."""
+    runs = {"in-file": [], "per-rank": []}
+    text = bs.scene_text("ck", steps, **CK_SCENE).replace("output_every = 10", "output_every = 5")
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(repeat):
+            for mode in runs:
+                r = bs.measure(text + f'[output]\ncheckpoint_seconds = 0.0\ncheckpoints = "{mode}"\n', 2, tmp,
+                               out_name=f"{mode}.h5", threads=1)
+                runs[mode].append({k: ([c.get(k, 0.0) for c in r["per_rank"]] if k != "wall" else r["wall"])
+                                   for k in ("wall", "advance", "gather", "hdf5", "wait_recv", "wait_end")})
+                print(mode, r["wall"], runs[mode][-1]["hdf5"], flush=True)
+        differ, n = bs.identical_files(Path(tmp) / "in-file.h5", Path(tmp) / "per-rank.h5")
+    return dict(runs=runs, scene=f"{CK_SCENE}, {steps} steps, output every 5, a checkpoint at each output",
+                datasets_differing=[differ, n])
 
 
 def costs():
@@ -149,6 +222,13 @@ def costs():
 def measure(steps, hybrid=False, again=None):
     """Every run, the task costs and the gather rate; with ``again`` (a run label, e.g. '2x1') only
     that run, the rest of the file kept and its previous entry moved to 'earlier'."""
+    if again == "checkpoints":    # per-rank checkpoints: their costs, and 2 ranks side by side
+        res = json.loads(OUT.read_text())
+        res["checkpoints"] = dict(slab=slab_cost(), link=link_cost(), side_by_side=checkpoint_runs(),
+                                  measured=time.strftime("%Y-%m-%d %H:%M") +
+                                  " by python scripts/scaling.py measure --again checkpoints")
+        OUT.write_text(json.dumps(res, indent=1))
+        return
     if again == "costs":
         res = json.loads(OUT.read_text())
         res.update(costs())
@@ -296,8 +376,9 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
     advance fills in around the fixed work: wall = max(Σ work / R, max_r fixed_r) + the last batch's
     largest task (the run's end) + start-up.
 
-    ``ck_per_rank``: each rank writes its own slab of the state (not built: per-rank files or
-    parallel HDF5).  ``split`` = g: a set's task split over a group of g ranks (not built): each
+    ``ck_per_rank``: each rank writes its own slab of the state (output.checkpoints = "per-rank"):
+    a slab file per rank at the measured slab rate, and on rank 0 the links, a + b·R seconds a
+    checkpoint (measured: ``measure --again checkpoints``).  ``split`` = g: a set's task split over a group of g ranks (not built): each
     does 1/g of the transforms, and the set's data crosses the group twice (rows, then columns) at
     the gather rate.  With ``parts`` returns (wall, {what: seconds}) as well."""
     fits, diag, bw, row_write, ck_write, ck_bytes = (
@@ -306,9 +387,9 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
     size = {"I1": n_loop, "I2": n_surf}
     task = {inv: fits[(inv, "all")][0] * size[inv] ** fits[(inv, "all")][1] for inv in ("I1", "I2")}
     recv = {inv: size[inv] * PART_BYTES * (ranks - 1) / ranks / bw for inv in ("I1", "I2")}
-    if split > 1:
-        g = min(split, ranks)
-        task = {inv: task[inv] / g + 2 * size[inv] * PART_BYTES * (g - 1) / g / bw for inv in task}
+    g = min(split, ranks)
+    if g > 1:
+        task = {inv: (task[inv] + 2 * size[inv] * PART_BYTES * (g - 1) / g / bw) / g for inv in task}   # a share
     base = {"I2": 0, "I1": 1 % ranks}                   # diagnostics.assign_sets: the surface first
     outputs = steps // every + 1
     fixed = np.zeros(ranks)
@@ -325,7 +406,9 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
             k = min(b, outputs - done)
             for inv in ("I2", "I1"):
                 r = (base[inv] + j) % ranks
-                fixed[r] += k * (task[inv] + recv[inv])
+                fixed[r] += k * recv[inv]
+                for m in range(g):                 # a split task: its g shares on g consecutive ranks
+                    fixed[(r + m) % ranks] += k * task[inv]
                 largest = max(largest, k * task[inv])
             fixed[0] += k * row_write
             done, j = done + k, j + 1
@@ -334,7 +417,8 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
         pair_time = advance / ranks                     # (for the count of checkpoints only)
         count = 1 + int(n * every * c * (outputs - 1) / ranks // 60.0)
         if ck_per_rank:
-            fixed += count * ck_bytes * n / ranks * ck_write
+            fixed += count * ck_bytes * n / ranks * model.get("slab_per_byte", ck_write)
+            fixed[0] += count * (model.get("link_fixed", 0.0) + model.get("link_per_slab", 0.0) * ranks)
         else:
             fixed[0] += count * ck
     total = advance + diag_total + fixed.sum()
@@ -347,7 +431,7 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
 
 DESIGNS = (("the driver now: rotating owners, batches capped", {}),
            ("… before the cap (one batch a pair on many ranks)", dict(batch_cap=False)),
-           ("+ checkpoints written by every rank (not built)", dict(ck_per_rank=True)),
+           ("+ checkpoints written by every rank (output.checkpoints = \"per-rank\")", dict(ck_per_rank=True)),
            ("+ the sets' tasks split over 8 ranks (not built)", dict(ck_per_rank=True, split=8)))
 
 
@@ -397,6 +481,10 @@ def build_model(res):
     row_write = (one["phases"]["hdf5"] - len(pair_costs) * ck_write * ck_bytes * n) / outputs
     model = dict(fits=fit_tasks(res["tasks"]), diag=res["diag_per_point"], bw=res["gather"]["bytes_per_second"],
                  row_write=max(row_write, 0.0), ck_write_per_byte=ck_write, ck_bytes_per_point=ck_bytes)
+    if "checkpoints" in res:      # per-rank checkpoints: a slab's write rate, rank 0's links
+        ck = res["checkpoints"]
+        model.update(slab_per_byte=ck["slab"]["seconds_per_byte"], link_fixed=max(ck["link"]["fixed"], 0.0),
+                     link_per_slab=ck["link"]["per_slab"])
     # start-up: what the 1-rank run spent outside its phases (imports, code generation, compile cache)
     ph = one["phases"]
     startup = one["wall"] - (ph["advance"] + ph["gather"] + ph["invariants"] + ph["hdf5"])
@@ -469,7 +557,8 @@ def main():
     ap.add_argument("--steps", type=int, default=1000, help="steps of the paper scene (its own: 1,000)")
     ap.add_argument("--hybrid", action="store_true", help="also 1 rank x 2 threads")
     ap.add_argument("--again", help="measure only this run (e.g. 2x1) again, or 'costs' (B and C), keeping the "
-                    "rest of the file; '1x1-busy': one rank while another process keeps the second core busy")
+                    "rest of the file; '1x1-busy': one rank while another process keeps the second core busy; "
+                    "'checkpoints': per-rank checkpoints' costs and 2 ranks side by side, in-file against per-rank")
     args = ap.parse_args()
     if args.what == "measure":
         measure(args.steps, args.hybrid, args.again)
