@@ -228,7 +228,13 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
             if f is not None:
                 close_quietly(f)
-    todo, token = comm.bcast((todo, token) if rank == 0 else None, root=0)
+    # the pairs to run go to every rank without their saved states (a state is every point's:
+    # 314 bytes a point and pair); each rank gets its own rows of one when its pair begins
+    sent = todo if rank != 0 or isinstance(todo, Exception) else \
+        [None if t is None else (t[0], None if t[1] is None else True) for t in todo]
+    sent, token = comm.bcast((sent, token) if rank == 0 else None, root=0)
+    if rank != 0:
+        todo = sent
     if isinstance(todo, Exception):
         if replacing is not None:
             replacing.abandon()
@@ -314,8 +320,11 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
     if saved is None:
         st = engine.state(q0[lo:hi])
     else:
-        saved = comm.bcast(saved if rank == 0 else None, root=0)
-        st = State.from_checkpoint({k: v[lo:hi] for k, v in _unpad(saved, s_tab).items()}, h)
+        rows = None
+        if rank == 0:
+            saved = _unpad(saved, s_tab)
+            rows = [{k: v[a:b] for k, v in saved.items()} for a, b in blocks]
+        st = State.from_checkpoint(comm.scatter(rows, root=0), h)     # this rank's rows of the saved state
     t_start = time.perf_counter()
     pair = _Pair(name, (lo, hi), Diagnostics(scene, system, q0[lo:hi]), clock, batch or 1, cadence or 1, t_start,
                  stream.spent.snapshot(), start_step, (start_step + scene.steps) // 2,

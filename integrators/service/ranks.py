@@ -24,6 +24,9 @@ class _Serial:
     def bcast(self, obj, root=0):
         return obj
 
+    def scatter(self, objs, root=0):
+        return objs[0]
+
     def Barrier(self):
         pass
 
