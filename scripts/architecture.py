@@ -104,13 +104,16 @@ def driver_parts(graph) -> list:
                      f"{', '.join(f'`{u.rsplit(chr(46), 1)[-1]}`' for u in users) or '—'} |")
     lines += ["", "One batch of outputs on one rank (driver `_run_pair` → `_Stream`):", "",
               "1. `engine.march` advances the rank's block; at each output `_Stream.take` keeps the points' "
-              "errors (`diagnostics`) and the rank's part of each set (`tasks.Tasks.parts`).",
+              "errors (`diagnostics`) and the rank's part of each set (`tasks.Tasks.parts`); at a checkpoint "
+              "its points' state, copied for rank 0 or, with `output.checkpoints = \"per-rank\"`, written "
+              "as its own slab file (`_Stream.write_slab` → `output.write_slab`).",
               "2. At the batch's end `_Stream.close_batch` sends the parts to the batch's task owners "
               "(`tasks.Tasks.needs`, the rotation; `transport.Transport.send`) and goes on advancing.",
               "3. A task owner, once the parts are here (`transport.Transport.arrived`), computes the sets' "
               "values (`tasks.Tasks.run`; a refining set through `refine`) and sends them with its errors "
               "and pieces to rank 0.",
-              "4. Rank 0 writes the batch's rows in order (`writer.Writer.write` → `output`), a pair's "
+              "4. Rank 0 writes the batch's rows in order (`writer.Writer.write` → `output`), the state or "
+              "the links to the ranks' slabs (`output.link_checkpoint`), a pair's "
               "status and clocks at its end (`writer.Writer.finish_pair`), and from about each pair's middle "
               "sends the next pair's split (`ranks.Planner`, from the rates every rank sent; `clocks.Spent` "
               "keeps them net of output work).",
