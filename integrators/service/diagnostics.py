@@ -31,9 +31,10 @@ COST_PER_POINT = {("I1", "canonical"): 0.25, ("I1", "noncanonical"): 0.20, ("I1"
 def assign_sets(scene, size) -> dict:
     """{(invariant, form): rank} with every form of a set on one rank (the sets longest first to the
     least loaded): a rank computes a set's forms together, sharing the transforms of q
-    (invariants.forms), which one form per rank would repeat.  The driver turns this by one rank a
-    batch (tasks.Tasks.owners), so the ranks take the sets in turn and share the work over
-    batches rather than within one.  Deterministic."""
+    (invariants.forms), which one form per rank would repeat.  The driver gives each batch's sets
+    to the ranks with the least task work so far (tasks.Tasks.assign), so the ranks share the work
+    over batches rather than within one; this assignment places a refining set in the first pair.
+    Deterministic."""
     load = np.zeros(size)
     out = {}
     sets = [(sum(COST_PER_POINT[(spec.invariant, f)] for f in scene.forms) * spec.count, spec.invariant)

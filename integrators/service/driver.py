@@ -6,7 +6,8 @@ advance rate and rank 0's is smaller by the cost of its output work (see ``ranks
 advances its block with each pair.  At every output each rank keeps the per-point errors of its
 points and its part of each sample set; once a batch of outputs (about two seconds of advancing)
 it sends the sets' parts to the ranks that own their invariant tasks in that batch (a set's forms
-on one rank, the owners turned by one rank a batch: ``_Stream.owners``) and goes on, without
+on one rank, each batch's sets to the ranks given the least task work so far: ``tasks.Tasks.assign``)
+and goes on, without
 waiting for anyone (``_Stream``).  A task owner runs a batch's tasks once the parts have arrived,
 and every rank sends its pieces to rank 0, which appends the rows to the HDF5 file in order (see
 :mod:`integrators.service.output`); about every ``output.checkpoint_seconds`` and at a pair's end
@@ -402,12 +403,12 @@ def _batch(seconds_per_output, points) -> int:
     return max(1, min(by_time, BATCH_BYTES // (128 * max(points, 1))))
 
 
-TURNS = 4                    # batches a run holds per rank, at least: how evenly the rotation shares the tasks
+TURNS = 4                    # batches a run holds per rank, at least: how evenly the tasks can be shared
 
 
 def turns(outputs, ranks) -> int:
-    """The most outputs a batch may hold so that the run has about TURNS batches a rank: the task
-    owners turn by batch (tasks.Tasks.owners), so with fewer batches than ranks some ranks would
+    """The most outputs a batch may hold so that the run has about TURNS batches a rank: a batch's
+    set goes to one rank (tasks.Tasks.assign), so with fewer batches than ranks some ranks would
     never take a set's tasks and one batch's owner would take a whole pair's (on many ranks a pair
     is a few seconds, and two seconds of advancing would be the whole pair)."""
     return max(1, outputs // (TURNS * ranks))
@@ -524,8 +525,8 @@ class _Stream:
         comm, t0 = self.comm, time.perf_counter()
         held, pair.held = pair.held, []
         j, self.batches = self.batches, self.batches + 1
-        batch = Batch(pair, held, last, j)
-        for o, sets in self.tasks.needs(*self.tasks.of(batch)).items():
+        batch = Batch(pair, held, last, j, self.tasks.assign(len(held), self.tasks.pair_index(pair)))
+        for o, sets in self.tasks.needs(batch.owners).items():
             if o != comm.rank:
                 self.transport.send({k: [x.parts[k] for x in held] for k in sets}, o, PARTS)
         self.current = pair
@@ -541,7 +542,7 @@ class _Stream:
     def _ready(self):
         """Whether every other rank's parts of the oldest queued batch have arrived (a rank's parts
         come in its batches' order, and only for the batches whose tasks this rank owns)."""
-        return self.transport.arrived(self.tasks.others(self.comm.rank, *self.tasks.of(self.pending[0])), PARTS)
+        return self.transport.arrived(self.tasks.others(self.comm.rank, self.pending[0].owners), PARTS)
 
     def work(self, block):
         """Run the tasks of the queued batches in order: those whose parts are here; with ``block``,
@@ -552,7 +553,7 @@ class _Stream:
     def _run_tasks(self, b):
         rank, clock = self.comm.rank, b.pair.clock
         t0 = time.perf_counter()
-        got = {r: self.transport.receive(r, PARTS) for r in self.tasks.others(rank, *self.tasks.of(b))}
+        got = {r: self.transport.receive(r, PARTS) for r in self.tasks.others(rank, b.owners)}
         wait = time.perf_counter() - t0
         values = self.tasks.run(rank, b, got)      # parts[k][i]: set k at the batch's i-th output
         mine = [(x.errors, v, x.piece) for x, v in zip(b.held, values)]

@@ -16,10 +16,10 @@ under-resolved there).  The rule looks at the output alone, not at the outputs b
 rank computing it gets the same level and the same bits, whatever ran before on that rank.
 
 Who advances the new points: the rank that computes the set's invariants for an output (the
-set's task owner for that batch, tasks.Tasks.owners) keeps its own copy of each level's new
+set's task owner for that batch, tasks.Tasks.assign) keeps its own copy of each level's new
 points and moves it forward to the outputs it is given (they come in increasing order on a
-rank).  On one rank that is one catch-up and one advance; on R ranks each of the ranks that take
-the set in turn repeats it (R times the new points' advance, documented in docs/benchmarks.md,
+rank).  A refining set's tasks stay on one rank for a whole pair (tasks.Tasks.assign), so on any
+number of ranks that is one catch-up and one advance a pair, done by that rank (docs/benchmarks.md,
 "Self-refining sample sets").
 """
 from __future__ import annotations

@@ -2,12 +2,15 @@
 
 Each rank keeps, at every output, its points' errors (:meth:`Diagnostics.point_errors`) and its
 part of each sample set (q, p, λ, live): an :class:`Output`.  The outputs of a batch go together
-(:class:`Batch`).  A set's invariants in every form are one rank's task for a batch: the
-assignment (:func:`integrators.service.diagnostics.assign_sets`) turned by one rank a batch
-(:meth:`Tasks.owners`), so over any R consecutive batches every rank takes every set once.  The
-owner gathers the set's parts from every rank and computes its values (:meth:`Tasks.run`); a set
-that refines itself takes the coarsest level that resolves it (integrators.service.refine).  A task
-is the same function of the same points on any rank, so no bit depends on who computes it.
+(:class:`Batch`).  A set's invariants in every form are one rank's task for a batch, given when the
+batch closes (:meth:`Tasks.assign`) to the rank that has been given the least task work so far,
+the costliest set first, by the cost estimates of :data:`diagnostics.COST_PER_POINT` × the set's
+points × the batch's outputs.  Every rank closes the same batches in the same order with the same
+sizes, so every rank makes the same assignment without a message.  The owner gathers the set's
+parts from every rank and computes its values (:meth:`Tasks.run`); a set that refines itself
+stays on one rank for a pair and takes the coarsest level that resolves it
+(integrators.service.refine).  A task is the same function of the same points on any rank, so no
+bit depends on who computes it.
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import dataclasses
 import numpy as np
 
 from . import output
-from .diagnostics import assign_sets
+from .diagnostics import COST_PER_POINT, assign_sets
 from .refine import refined_values
 
 
@@ -37,7 +40,8 @@ class Batch:
     pair: object                    # the driver's _Pair
     held: list                      # an Output per output
     last: bool                      # the pair's last batch
-    index: int = 0                  # its place among the run's batches (whose turn each task is)
+    index: int = 0                  # its place among the run's batches
+    owners: dict = dataclasses.field(default_factory=dict)   # {(invariant, form): rank} (Tasks.assign)
 
 
 class Tasks:
@@ -46,35 +50,45 @@ class Tasks:
 
     def __init__(self, scene, size, threshold):
         self.scene, self.size, self.threshold = scene, size, threshold
-        self.assignment = assign_sets(scene, size)
+        self.first = assign_sets(scene, size)          # a refining set's rank in the run's first pair
         self.refining = {spec.invariant for spec, _ in scene.sample_sets if spec.levels}
         self.order = {output.pair_name(t, p): k for k, (t, p) in enumerate(scene.pairs)}
+        self.cost = {spec.invariant: sum(COST_PER_POINT[(spec.invariant, f)] for f in scene.forms) * spec.count
+                     for spec, _ in scene.sample_sets}  # one output's task, in the estimates' units
+        self.load = np.zeros(size)                       # task work given to each rank so far
 
-    def owners(self, j, k=0):
-        """{(invariant, form): rank} of batch ``j`` of the run's ``k``-th pair: the assignment
-        (:func:`assign_sets`: a set's forms on one rank, longest set first to the least loaded)
-        turned by j ranks, so that over any R consecutive batches every rank runs every task once:
-        the largest task bounds how late a batch's values come, not how many outputs a second the
-        ranks get through (docs/benchmarks.md, "Distributed output").  A set that refines itself
-        turns by pair instead (k ranks): its new points are advanced by the rank that takes its
-        tasks (integrators.service.refine), once a pair rather than once per rank."""
-        return {key: (r + (k if key[0] in self.refining else j)) % self.size for key, r in self.assignment.items()}
+    def assign(self, outputs, pair=0) -> dict:
+        """{(invariant, form): rank} of the next batch, of ``outputs`` outputs of the run's
+        ``pair``-th pair: each set, the costliest first, to the rank given the least task work so
+        far (the lowest on a tie), its work added.  So the largest task bounds how late a batch's
+        values come, not how many outputs a second the ranks get through, and batches of unequal
+        size do not pile the large set on some ranks (turning the owners by batch index did: with
+        two batches a pair, a big and a small one, the big ones' surface tasks went to every other
+        rank; docs/benchmarks.md, "Distributed output").  A set that refines itself stays on one
+        rank for the whole pair, turning by one rank a pair: its new points are advanced by the
+        rank that takes its tasks (integrators.service.refine), once a pair rather than once per
+        rank.  Called once per batch, in the same order on every rank."""
+        own = {}
+        for inv in sorted(self.cost, key=lambda i: (-self.cost[i], i)):
+            r = (self.first[(inv, self.scene.forms[0])] + pair) % self.size if inv in self.refining \
+                else int(np.argmin(self.load))
+            self.load[r] += self.cost[inv] * outputs
+            own.update({(inv, f): r for f in self.scene.forms})
+        return own
 
-    def needs(self, j, k=0):
-        """{owner: [set index]} of batch ``j`` of the ``k``-th pair: which ranks need which sets' parts."""
-        own = self.owners(j, k)
+    def needs(self, owners):
+        """{owner: [set index]} of a batch with ``owners``: which ranks need which sets' parts."""
         sets = list(enumerate(s for s, _ in self.scene.sample_sets))
-        return {o: [i for i, spec in sets if any(own[(spec.invariant, fm)] == o for fm in self.scene.forms)]
-                for o in sorted(set(own.values()))}
+        return {o: [i for i, spec in sets if any(owners[(spec.invariant, fm)] == o for fm in self.scene.forms)]
+                for o in sorted(set(owners.values()))}
 
-    def others(self, rank, j, k=0):
-        """The ranks whose parts of batch ``j`` (of the ``k``-th pair) ``rank`` waits for (none
-        unless it owns a task)."""
-        return [r for r in range(self.size) if r != rank] if rank in self.needs(j, k) else []
+    def others(self, rank, owners):
+        """The ranks whose parts of a batch with ``owners`` ``rank`` waits for (none unless it owns a task)."""
+        return [r for r in range(self.size) if r != rank] if rank in self.needs(owners) else []
 
-    def of(self, batch):
-        """(batch index, pair index) of a :class:`Batch`: what the rotation turns by."""
-        return batch.index, self.order[batch.pair.name]
+    def pair_index(self, pair):
+        """The place of a pair (the driver's _Pair, or its name) in the scene's run order."""
+        return self.order[getattr(pair, "name", pair)]
 
     def parts(self, block, st):
         """This rank's part of each sample set (copies of q, p, λ, live: the state moves on);
@@ -91,10 +105,9 @@ class Tasks:
         """The values of ``rank``'s tasks at each output of ``batch``: [{(invariant, form): (value,
         resolution, computed, all live)}], from ``got`` = {rank: parts[set][output]} of the other ranks."""
         scene, pair = self.scene, batch.pair
-        j, k = self.of(batch)
         values = [{} for _ in batch.held]
-        own = self.owners(j, k)
-        for s in self.needs(j, k).get(rank, []):
+        own = batch.owners
+        for s in self.needs(own).get(rank, []):
             spec = scene.sample_sets[s][0]
             forms = [fm for fm in scene.forms if own[(spec.invariant, fm)] == rank]
             for i, v in enumerate(values):
