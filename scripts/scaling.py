@@ -249,9 +249,10 @@ def measure(steps, hybrid=False, again=None):
         return
     if again:
         res = json.loads(OUT.read_text())
-        res["earlier"] = res.get("earlier", []) + [{again: {"wall": res[again]["wall"],
-                                                              "per_rank": res[again].get("per_rank")},
-                                                      "meta": res["meta"]}]
+        if again in res:
+            res["earlier"] = res.get("earlier", []) + [{again: {"wall": res[again]["wall"],
+                                                                  "per_rank": res[again].get("per_rank")},
+                                                          "meta": res["meta"]}]
         ranks, threads = map(int, again.split("x"))
         with tempfile.TemporaryDirectory() as tmp:
             res[again] = bs.measure(bs.scene_text("p", steps, **PAIRS), ranks, tmp, out_name=f"{again}.h5",
@@ -366,12 +367,12 @@ BATCH_SECONDS, TURNS = 2.0, 4          # as integrators.service.driver (_batch, 
 
 
 def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup, ck_per_rank=False,
-                     split=1, batch_cap=True, parts=False):
+                     split=1, batch_cap=True, parts=False, rotate_by_index=False):
     """Predicted wall [s] of the driver as it schedules the work: every batch of every pair with
     its size (about BATCH_SECONDS of advancing, capped at outputs/(TURNS·R) with ``batch_cap``, as
-    driver.turns does), each set's task of a batch on the rank the rotation gives it
-    (tasks.Tasks.owners: the assignment turned by the batch's index), that rank also receiving the
-    set's parts; rank 0 writes every row and (unless ``ck_per_rank``) gathers and writes every
+    driver.turns does), each set's task of a batch on the rank given the least task work so far
+    (tasks.Tasks.assign; ``rotate_by_index``: the driver before, the owners turned by the batch's
+    index), that rank also receiving the set's parts; rank 0 writes every row and (unless ``ck_per_rank``) gathers and writes every
     checkpoint.  The ranks do not meet and the split follows their measured rates, so the points'
     advance fills in around the fixed work: wall = max(Σ work / R, max_r fixed_r) + the last batch's
     largest task (the run's end) + start-up.
@@ -392,7 +393,7 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
         task = {inv: (task[inv] + 2 * size[inv] * PART_BYTES * (g - 1) / g / bw) / g for inv in task}   # a share
     base = {"I2": 0, "I1": 1 % ranks}                   # diagnostics.assign_sets: the surface first
     outputs = steps // every + 1
-    fixed = np.zeros(ranks)
+    fixed, given = np.zeros(ranks), np.zeros(ranks)
     advance = diag_total = 0.0
     ck = ck_bytes * n * ((ranks - 1) / ranks / bw + ck_write)
     j, largest = 0, 0.0
@@ -405,7 +406,11 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
         while done < outputs:
             k = min(b, outputs - done)
             for inv in ("I2", "I1"):
-                r = (base[inv] + j) % ranks
+                if rotate_by_index:                # the driver before: owners turned by the batch's index
+                    r = (base[inv] + j) % ranks
+                else:                              # tasks.Tasks.assign: to the least task work so far
+                    r = int(np.argmin(given))
+                    given[r] += k * task[inv]
                 fixed[r] += k * recv[inv]
                 for m in range(g):                 # a split task: its g shares on g consecutive ranks
                     fixed[(r + m) % ranks] += k * task[inv]
@@ -425,14 +430,26 @@ def predict_schedule(model, ranks, n_loop, n_surf, steps, every, pair_costs, sta
     wall = max(total / ranks, fixed.max()) + largest + startup
     if parts:
         return wall, {"advance": advance / ranks, "fixed_max": fixed.max(), "rank0_fixed": fixed[0],
-                      "even": total / ranks, "tail": largest}
+                      "even": total / ranks, "tail": largest, "fixed": fixed.tolist()}
     return wall
 
 
-DESIGNS = (("the driver now: rotating owners, batches capped", {}),
-           ("… before the cap (one batch a pair on many ranks)", dict(batch_cap=False)),
+DESIGNS = (("the driver now: owners by least task work, batches capped", {}),
+           ("… owners turned by batch index (the driver before)", dict(rotate_by_index=True)),
+           ("… and before the cap (one batch a pair on many ranks)", dict(batch_cap=False, rotate_by_index=True)),
            ("+ checkpoints written by every rank (output.checkpoints = \"per-rank\")", dict(ck_per_rank=True)),
            ("+ the sets' tasks split over 8 ranks (not built)", dict(ck_per_rank=True, split=8)))
+
+
+def oversubscribed(model, pair_costs, startup, factor):
+    """The model of R ranks sharing C < R cores: every cost of a rank's work × R/C (each rank gets
+    C/R of a core while all are busy), the gather rate ÷ R/C."""
+    m = dict(model, fits={k: (a * factor, b) for k, (a, b) in model["fits"].items()},
+             bw=model["bw"] / factor)
+    for k in ("diag", "row_write", "ck_write_per_byte", "slab_per_byte", "link_fixed", "link_per_slab"):
+        if k in m:
+            m[k] = m[k] * factor
+    return m, [c * factor for c in pair_costs], startup * factor
 
 
 def schedule_tables(model, pair_costs, startup, steps, every, res):
@@ -445,6 +462,20 @@ def schedule_tables(model, pair_costs, startup, steps, every, res):
         pred = predict_schedule(model, r, 2000, 10000, steps, every, pair_costs, startup)
         print(f"| {r} | {', '.join(f'{w:.1f}' for w in walls)} | {pred:.1f} |")
     print()
+    cores = res["meta"].get("cores", 2)
+    over = [(k, int(k.split("x")[0])) for k in ("3x1", "4x1") if k in res]
+    if over:            # more ranks than cores: the schedule's structure, each rank on a share of a core
+        print(f"oversubscribed, {cores} cores: wall, and each rank's output work (its tasks' and rows' "
+              "seconds: the invariants and HDF5 clocks)")
+        print("| ranks | measured wall [s] | predicted [s] | output work a rank, measured [s] | predicted [s] |\n"
+              "|---:|---:|---:|---|---|")
+        for label, r in over:
+            m, pc, st = oversubscribed(model, pair_costs, startup, r / cores)
+            pred, parts = predict_schedule(m, r, 2000, 10000, steps, every, pc, st, parts=True)
+            work = [c.get("invariants", 0.0) + c.get("hdf5", 0.0) for c in res[label]["per_rank"]]
+            print(f"| {r} | {res[label]['wall']:.1f} | {pred:.1f} | {', '.join(f'{w:.1f}' for w in work)} | "
+                  f"{', '.join(f'{w:.1f}' for w in parts['fixed'])} |")
+        print()
     sizes = (("paper scene", 2000, 10000), ("10⁶ points", 166_000, 913 * 913))
     ranks = (1, 2, 8, 16, 64, 256, 1024)
     head = "| design | set | " + " | ".join(f"{r}" for r in ranks) + " |"
