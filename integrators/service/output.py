@@ -301,7 +301,10 @@ def write_slab(folder, name, state: dict, s_max):
     rank's slab of that output is written (:func:`link_checkpoint`).  OutputError in one line."""
     state = _pad_stages(state, s_max)
     path = folder / name
-    ensure_space(path, sum(v.nbytes for v in state.values()), None)
+    need = sum(v.nbytes for v in state.values()) + SPACE_MARGIN
+    if available_bytes(path) < need:
+        raise OutputError(f"no space left for the checkpoint slab '{path}' (it needs about {need / 2**20:.2f} MiB); "
+                          "the run file holds every output written before it: free space, then run again with --resume")
     try:
         with h5py.File(path, "w") as s:
             for field in STATE_FIELDS:
