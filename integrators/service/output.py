@@ -404,14 +404,6 @@ def prune_slabs(f, path, token):
                 pass
 
 
-def missing_slabs(f, path) -> list:
-    """The slab files that a valid checkpoint slot of ``f`` links to and that are not beside ``path``."""
-    folder = state_dir(path)
-    return [f"{folder.name}/{name}" for g in f["runs"].values() for slot in ("a", "b")
-            if int(g[f"checkpoint/{slot}/step"][()]) >= 0
-            for name, _, _ in slot_files(g[f"checkpoint/{slot}"]) if not (folder / name).is_file()]
-
-
 def read_checkpoint(g):
     """(step, state) of the newest valid slot, or (None, None).  A slot of per-rank slabs is read
     from the slab files themselves (beside the file), not through its virtual datasets, which
