@@ -108,7 +108,8 @@ def driver_parts(graph) -> list:
               "its points' state, copied for rank 0 or, with `output.checkpoints = \"per-rank\"`, written "
               "as its own slab file (`_Stream.write_slab` → `output.write_slab`).",
               "2. At the batch's end `_Stream.close_batch` sends the parts to the batch's task owners "
-              "(`tasks.Tasks.needs`, the rotation; `transport.Transport.send`) and goes on advancing.",
+              "(`tasks.Tasks.assign`: each set to the rank given the least task work so far; `transport.Transport.send`) "
+              "and goes on advancing.",
               "3. A task owner, once the parts are here (`transport.Transport.arrived`), computes the sets' "
               "values (`tasks.Tasks.run`; a refining set through `refine`) and sends them with its errors "
               "and pieces to rank 0.",
