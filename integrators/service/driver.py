@@ -528,7 +528,7 @@ class _Stream:
         batch = Batch(pair, held, last, j, self.tasks.assign(len(held), self.tasks.pair_index(pair)))
         for o, sets in self.tasks.needs(batch.owners).items():
             if o != comm.rank:
-                self.transport.send({k: [x.parts[k] for x in held] for k in sets}, o, PARTS)
+                self.transport.send({k: self.tasks.stack(held, k) for k in sets}, o, PARTS)
         self.current = pair
         self.pending.append(batch)
         self.transport.settle()
@@ -555,7 +555,7 @@ class _Stream:
         t0 = time.perf_counter()
         got = {r: self.transport.receive(r, PARTS) for r in self.tasks.others(rank, b.owners)}
         wait = time.perf_counter() - t0
-        values = self.tasks.run(rank, b, got)      # parts[k][i]: set k at the batch's i-th output
+        values = self.tasks.run(rank, b, got)      # got[r][k]: rank r's set k, stacked over the outputs
         mine = [(x.errors, v, x.piece) for x, v in zip(b.held, values)]
         t1 = time.perf_counter()
         refine = sum(r.seconds for r in b.pair.refiners.values())
