@@ -109,6 +109,51 @@ if comm.rank == 0:
 """
 
 
+TRANSPORT_CHILD = """
+import sys, time, numpy as np
+from mpi4py import MPI
+from integrators.service.ranks import communicator
+from integrators.service.transport import PARTS, Transport
+comm = communicator()
+t = Transport(comm)
+n, outputs, before = int(sys.argv[1]) // comm.size, int(sys.argv[2]), sys.argv[3] == "before"
+if before:        # the driver before: plain pickles, four arrays an output
+    t.comm = MPI.COMM_WORLD
+    part = lambda m: [(np.ones((m, 4)), np.ones((m, 4)), np.ones((m, 4)), np.ones(m, bool)) for _ in range(outputs)]
+else:             # now: pkl5, the outputs stacked (tasks.Tasks.stack)
+    part = lambda m: (np.ones((outputs, m, 4)), np.ones((outputs, m, 4)), np.ones((outputs, m, 4)),
+                      np.ones((outputs, m), bool))
+msg = {0: part(n // 6), 1: part(n - n // 6)}          # the loop's and the surface's parts (q, p, λ, live)
+size = lambda x: x.nbytes if isinstance(x, np.ndarray) else sum(size(y) for y in x)
+nbytes = size(list(msg.values()))
+for rep in range(6):
+    comm.Barrier()
+    t0 = time.perf_counter()
+    if comm.rank == 1:
+        t.send(msg, 0, PARTS)
+        t.finish()
+    else:
+        t.receive(1, PARTS)
+    dt = time.perf_counter() - t0
+if comm.rank == 0:
+    print(nbytes, dt)
+"""
+
+
+def transport_cost(points=12000, outputs=10, before=False):
+    """Bytes a second of the driver's own messages (transport.Transport: mpi4py pkl5) between 2
+    ranks: one rank's parts of a loop and a surface (q, p, λ, live of points/2 points) stacked over
+    ``outputs`` outputs as tasks.Tasks.stack does, the last of 6 sends (``before``: as the driver
+    sent them before, plain pickles of four arrays an output)."""
+    exe = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
+    r = subprocess.run([exe, "-n", "2", sys.executable, "-c", TRANSPORT_CHILD, str(points), str(outputs),
+                        "before" if before else "now"],
+                       capture_output=True, text=True, check=True)
+    nbytes, dt = r.stdout.split()
+    return dict(bytes=int(nbytes), seconds=float(dt), bytes_per_second=int(nbytes) / float(dt),
+                points=points, outputs=outputs)
+
+
 def gather_cost(points=12000):
     exe = shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec")
     r = subprocess.run([exe, "-n", "2", sys.executable, "-c", GATHER_CHILD, str(points)], capture_output=True,
@@ -222,6 +267,17 @@ def costs():
 def measure(steps, hybrid=False, again=None):
     """Every run, the task costs and the gather rate; with ``again`` (a run label, e.g. '2x1') only
     that run, the rest of the file kept and its previous entry moved to 'earlier'."""
+    if again == "transport":      # the driver's messages (pkl5), as the model's exchange rate
+        res = json.loads(OUT.read_text())
+        res["transport"] = dict(transport_cost(), measured=time.strftime("%Y-%m-%d %H:%M") +
+                                " by python scripts/scaling.py measure --again transport",
+                                before={f"{p} points, {k} outputs": transport_cost(p, k, before=True)["bytes_per_second"]
+                                        for p, k in ((12000, 10), (12000, 60), (100000, 10))},
+                                now={f"{p} points, {k} outputs": transport_cost(p, k)["bytes_per_second"]
+                                     for p, k in ((12000, 10), (12000, 60), (100000, 10))})
+        print(res["transport"])
+        OUT.write_text(json.dumps(res, indent=1))
+        return
     if again == "checkpoints":    # per-rank checkpoints: their costs, and 2 ranks side by side
         res = json.loads(OUT.read_text())
         res["checkpoints"] = dict(slab=slab_cost(), link=link_cost(), side_by_side=checkpoint_runs(),
@@ -510,7 +566,8 @@ def build_model(res):
     ck_write = res["write"]["seconds_per_byte"]
     # the 1-rank run's HDF5 phase is its rows and one checkpoint a pair (every pair is under 60 s)
     row_write = (one["phases"]["hdf5"] - len(pair_costs) * ck_write * ck_bytes * n) / outputs
-    model = dict(fits=fit_tasks(res["tasks"]), diag=res["diag_per_point"], bw=res["gather"]["bytes_per_second"],
+    bw = res.get("transport", res["gather"])["bytes_per_second"]     # the driver's messages, as measured last
+    model = dict(fits=fit_tasks(res["tasks"]), diag=res["diag_per_point"], bw=bw,
                  row_write=max(row_write, 0.0), ck_write_per_byte=ck_write, ck_bytes_per_point=ck_bytes)
     if "checkpoints" in res:      # per-rank checkpoints: a slab's write rate, rank 0's links
         ck = res["checkpoints"]
