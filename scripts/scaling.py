@@ -372,7 +372,7 @@ def predict_wall(model, ranks, n_loop, n_surf, steps, every, pair_costs, startup
     seconds of it that the checkpoints take: the state sent to rank 0 and written there).
 
     ``rotate``: a set's forms on one rank (diagnostics.assign_sets), the owners turned by one rank a
-    batch (tasks.Tasks.owners), so over R batches
+    batch (the driver of that time; now tasks.Tasks.assign), so over R batches
     every rank runs every task once and receives every set's parts once: an interval costs
     max((N·k·c + Σ_r W_r)/R, rank 0's row write) + Σ_sets G/R, the largest task no longer a floor
     (it must only fit in the R intervals of its turn, which Σ W/R ≥ max W guarantees)."""

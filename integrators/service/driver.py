@@ -212,12 +212,11 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             if resume:
                 f = output.reopen(path, scene)
             else:
-                max_s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
                 target = path
                 if path.exists():
                     replacing = Replacement(path.resolve())      # (through a symlink: its target)
                     target = replacing.new
-                f = output.create(target, scene, version, n, State.schema(n, system.d, max_s), UNDER_RESOLVED)
+                f = output.create(target, scene, version, n, State.schema(n, system.d, scene.max_stages), UNDER_RESOLVED)
             for tab, proj in scene.pairs:
                 todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
                                                 finished_too=grown_from is not None))
@@ -469,7 +468,7 @@ class _Stream:
     def __init__(self, comm, scene, f, after_output, timings, threshold, folder=None, token=""):
         self.comm, self.scene = comm, scene
         self.slabs = folder if scene.checkpoints == "per-rank" else None     # where each rank writes its state
-        self.token, self.s_max = token, max([scene.tableau(t).s for t in scene.tableaus] + [1])
+        self.token = token
         self.transport = Transport(comm)
         self.tasks = Tasks(scene, comm.size, threshold)
         self.spent = Spent()
@@ -513,7 +512,7 @@ class _Stream:
         piece = {"breakdown_time": st.breakdown_time.copy(), "slab": []}
         if hi > lo:
             name = output.slab_name(pair.name, step, self.token, lo, hi)
-            output.write_slab(self.slabs, name, st.checkpoint(), self.s_max)
+            output.write_slab(self.slabs, name, st.checkpoint(), self.scene.max_stages)
             piece["slab"] = [(name, lo, hi)]
         if self.scene.store_points:
             piece["q"] = st.q.copy()

@@ -206,6 +206,12 @@ class Scene:
     _built: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)   # system, tableaus: made once
 
     @property
+    def max_stages(self) -> int:
+        """The most stages s of the scene's tableaus (1 without any): the checkpoint's stage arrays
+        are this wide, whichever pair wrote them."""
+        return max([self.tableau(t).s for t in self.tableaus] + [1])
+
+    @property
     def pairs(self):
         """(tableau, projection) pairs in run order; a step map is (its function's name, 'map')."""
         return [(t, p) for t in self.tableaus for p in self.projections] + \
@@ -622,7 +628,7 @@ def _check_memory(scene, system):
     if free is None:
         return
     n, d = scene.n_points, system.d
-    s = max([scene.tableau(t).s for t in scene.tableaus] + [1])
+    s = scene.max_stages
     local = _local_ranks()
     per_point, state = memory_per_point(d, s)
     # every local rank holds all points' samples and set values (~16 arrays of d doubles) and

@@ -105,7 +105,7 @@ class Tasks:
     def stack(held, s):
         """This rank's parts of set ``s`` over a batch's outputs ``held``, as the four arrays (q, p, λ,
         live) each with the outputs along a first axis: what goes to the set's owner.  A few large
-        arrays travel 3.5-6× faster than four small ones an output (transport: mpi4py pkl5 sends
+        arrays travel 3-5× faster than four small ones an output (transport: mpi4py pkl5 sends
         large arrays as their own buffers; docs/benchmarks.md); the owner takes output i as
         ``a[i]`` of each, the same values."""
         return tuple(np.stack([x.parts[s][c] for x in held]) for c in range(4))
