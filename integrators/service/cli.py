@@ -22,11 +22,12 @@ import dataclasses
 import os
 import signal
 import sys
+import threading
 import time
 
 import numpy as np
 
-from .stop import StopRequest
+from .stop import GRACE, StopRequest, in_critical, in_user_code
 
 EXIT_OK, EXIT_NOT_OK, EXIT_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 
@@ -41,8 +42,75 @@ STOP = StopRequest()      # what the signal handlers set and cmd_run passes to t
 def _on_signal(signum, frame):
     """Leave the exception with the driver, which raises it before its next step.  Raising here
     instead would land wherever Python happens to be, including inside object destructors and
-    weakref callbacks (h5py's), where the exception is swallowed with a printed traceback."""
-    STOP.set(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
+    weakref callbacks (h5py's), where the exception is swallowed with a printed traceback; but
+    inside the user's code (a step map, a shape: stop.guarded), which may never return, it is
+    raised at once."""
+    exc = Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    if in_user_code():
+        raise exc
+    STOP.set(exc)
+
+
+_STOPPED = [threading.Lock()]    # held by whoever reports this run's stop: the main thread or the watchdog
+_HINT = []                       # the resume command, once the run knows its output
+
+
+def _interrupted_message(signum):
+    sig = "SIGTERM" if signum == signal.SIGTERM else "SIGINT"
+    if not _HINT:
+        return f"interrupted by {sig} before the run began; no file was written"
+    return f"interrupted by {sig}; the output file is readable up to its last output; continue with: {_HINT[0]}"
+
+
+def _watchdog(sock, rank, stopped):
+    """Rank 0's guard against a run that cannot act on a signal (a rank stuck in user code that
+    keeps rank 0 waiting in an MPI receive, user code stuck in C): the C-level handler wakes this
+    thread through ``signal.set_wakeup_fd``; if the run has not stopped stop.GRACE seconds later,
+    and rank 0 is not writing the file (stop.critical), it says how to resume and ends every rank
+    (MPI Abort) or this process.  The file keeps every output flushed before, as after SIGKILL."""
+    while True:
+        try:
+            data = sock.recv(64)
+        except OSError:
+            return
+        if not data:                     # the run is over (its end closed the other side)
+            return
+        signums = [b for b in data if b in (signal.SIGTERM, signal.SIGINT)]
+        if not signums:
+            continue
+        time.sleep(GRACE)
+        while in_critical():
+            time.sleep(0.05)
+        if not stopped.acquire(blocking=False):
+            return                       # the run stopped by itself and is reporting it
+        code = 143 if signums[0] == signal.SIGTERM else 130
+        if rank == 0:
+            try:
+                print(f"poincare: {_interrupted_message(signums[0])} (the run did not stop within {GRACE:g} s: "
+                      "user code that does not return?)", file=sys.stderr, flush=True)
+            except Exception:
+                pass
+        _abort_other_ranks(code, wait=False)
+        os._exit(code)
+
+
+def _start_watchdog(rank, stopped):
+    """Let the C-level signal handler wake :func:`_watchdog` (main thread only); returns an undo."""
+    import socket
+    r, w = socket.socketpair()
+    w.setblocking(False)
+    try:
+        old = signal.set_wakeup_fd(w.fileno(), warn_on_full_buffer=False)
+    except ValueError:                   # not the main thread (a caller's own thread): no watchdog
+        r.close()
+        w.close()
+        return lambda: None
+    threading.Thread(target=_watchdog, args=(r, rank, stopped), daemon=True, name="poincare-watchdog").start()
+
+    def undo():
+        signal.set_wakeup_fd(old)
+        w.close()
+    return undo
 
 
 def _rank() -> int:
@@ -56,16 +124,19 @@ def _rank() -> int:
     return 0
 
 
-def _abort_other_ranks(code):
+def _abort_other_ranks(code, wait=True):
     """Under mpiexec, stop every rank: the others may sit in a collective this rank will never join
     (a signal reaches Python only between bytecodes, not inside a blocking MPI call).  The file was
-    closed by the driver before this point."""
+    closed by the driver before this point (or, from the watchdog, flushed at its last output)."""
     if "mpi4py.MPI" not in sys.modules:
         return
     from mpi4py import MPI
     if MPI.Is_initialized() and not MPI.Is_finalized() and MPI.COMM_WORLD.Get_size() > 1:
-        sys.stdout.flush()
-        sys.stderr.flush()
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        except Exception:
+            pass
         time.sleep(0.5)        # let mpiexec forward this rank's last lines before Abort tears it down
         MPI.COMM_WORLD.Abort(code)
 
@@ -144,6 +215,8 @@ def cmd_run(args) -> int:
     LOADED.clear()                  # the summary lists the code this scene loads
     comm = communicator()
     scene = load_scene(args.scene)
+    if args.output is not None and not args.output.strip():
+        raise ValueError("-o/--output is empty: give a file name (or leave -o out for the scene's output.path)")
     out = args.output or scene.output
     if args.steps is not None:
         if args.steps < 1:
@@ -167,8 +240,8 @@ def cmd_run(args) -> int:
                   "(keep that folder beside the file to resume it)", flush=True)
         from ..engine import kernel_cached
         if not kernel_cached():
-            print("compiling the step engine (once per machine, about a minute on 2 cores; the first pair's wall "
-                  "time below includes it) ...", flush=True)
+            print("compiling the step engine (once per machine: about 50 s on 2 cores, before the first pair; "
+                  "the pairs' wall times below do not include it) ...", flush=True)
     note = None
     if comm.rank == 0 and len(scene.projections) > 1:      # the scene compares projections: can it?
         from ..audit.discrimination import discrimination
@@ -178,16 +251,31 @@ def cmd_run(args) -> int:
             print(f"note: {note}", flush=True)
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
+    _HINT[:] = [_printable(args._resume_hint)]
     summaries = run(scene, out, resume=args.resume, force=args.force, comm=comm,
                     progress=False if args.quiet else None, version=__version__, threads=threads,
                     stop=STOP)
     if comm.rank == 0:
         code = _print_summary(summaries, out, scene.n_outputs)
+        absolute = _energy_absolute_points(out)
+        if absolute:
+            print(f"note: energy is the absolute error |H − H0| at the {absolute} point{'s' if absolute > 1 else ''} "
+                  "where H0 = 0 (a relative error has no scale there), |H − H0|/|H0| elsewhere")
         if note:
             print(f"note: {note}")
         _print_user_code()
         return code
     return EXIT_OK
+
+
+def _energy_absolute_points(path) -> int:
+    """How many points' energy error the file records as absolute (H0 = 0): its root attribute."""
+    try:
+        import h5py
+        with h5py.File(path, "r") as f:
+            return int(f.attrs.get("energy_absolute_points", 0))
+    except (OSError, ValueError):
+        return 0
 
 
 def _print_user_code():
@@ -362,6 +450,9 @@ def main(argv=None) -> int:
         handler = _on_signal if rank == 0 else (lambda signum, frame: None)
         for signum in (signal.SIGTERM, signal.SIGINT):
             previous[signum] = signal.signal(signum, handler)
+        _HINT.clear()
+        _STOPPED[0] = threading.Lock()
+        undo_watchdog = _start_watchdog(rank, _STOPPED[0]) if rank == 0 else (lambda: None)
     try:
         return args.func(args)
     except OutputError as exc:
@@ -384,13 +475,16 @@ def main(argv=None) -> int:
         say(f"error: {exc}")
         return EXIT_INPUT
     except (KeyboardInterrupt, Terminated) as exc:
-        sig, code = ("SIGTERM", 143) if isinstance(exc, Terminated) else ("SIGINT", 130)
-        hint = getattr(args, "_resume_hint", None)
-        say(f"interrupted by {sig}; the output file is readable up to its last output"
-            + (f"; continue with: {hint}" if hint else ""))
+        signum, code = (signal.SIGTERM, 143) if isinstance(exc, Terminated) else (signal.SIGINT, 130)
+        if not _STOPPED[0].acquire(blocking=False):  # the watchdog is ending the process
+            time.sleep(3600)
+        say(_interrupted_message(signum))
         _abort_other_ranks(code)
         return code
     finally:
+        if previous:
+            undo_watchdog()
+            _STOPPED[0].acquire(blocking=False)       # a watchdog still waiting acts no more
         for signum, old_handler in previous.items():
             signal.signal(signum, old_handler)
         STOP.clear()

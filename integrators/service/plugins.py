@@ -33,14 +33,24 @@ def _module_file(mod_name, places):
     return None
 
 
-def load_callable(spec: str, what: str = "function", base: str | Path | None = None) -> Callable:
+def _inside(path, places) -> bool:
+    """Whether ``path`` (resolved: through symlinks) lies in one of ``places`` or below."""
+    path = path.resolve()
+    return any(path.is_relative_to(place.resolve()) for place in places)
+
+
+def load_callable(spec: str, what: str = "function", base: str | Path | None = None,
+                  confined: bool = True) -> Callable:
     """The callable named by ``spec``; ``what`` names it in errors ("step map", "loop.shape").
 
     User code runs, like a script, only from where the user put it: ``file.py`` next to the scene
-    (``base``) or in the current directory (or an absolute path), ``module`` (dotted: a package's
-    module) as a ``.py`` file or package found there.  An installed module (``builtins:print``,
-    ``os:system``) is refused: a scene names code of its own, not the machine's.  What was loaded
-    is recorded in :data:`LOADED` for the run's summary."""
+    (``base``) or in the current directory, or below either, ``module`` (dotted: a package's
+    module) as a ``.py`` file or package found there.  A file elsewhere (``../maps.py``, an absolute
+    path, a symlink out) and an installed module (``builtins:print``, ``os:system``) are refused: a
+    scene names code of its own, not the machine's.  ``confined`` False (``poincare audit``'s
+    command line, which the user types) also takes a file anywhere.  What was loaded is recorded in
+    :data:`LOADED` for the run's summary.  The callable comes back :func:`~.stop.guarded`: a signal
+    interrupts it where it is, and its ``sys.exit`` is a failure of the code, not of the run."""
     if not is_spec(spec):
         raise ValueError(f"{what} '{spec}' must be given as module:function or file.py:function")
     mod_name, func_name = spec.rsplit(":", 1)
@@ -53,6 +63,10 @@ def load_callable(spec: str, what: str = "function", base: str | Path | None = N
             if found is None:
                 raise ValueError(f"{what}: file '{mod_name}' not found"
                                  + (f" (looked in {', '.join(str(c.parent) for c in candidates)})" if candidates else ""))
+            if confined and not _inside(found, places):
+                raise ValueError(f"{what}: '{mod_name}' is outside "
+                                 f"{' and '.join(repr(str(p)) for p in dict.fromkeys(places))}; a scene runs "
+                                 "only code of its own from its folder or the current directory (copy the file there)")
         else:
             if not all(part.isidentifier() for part in mod_name.split(".")):
                 raise ValueError(f"{what}: '{mod_name}' is not a module name")
@@ -61,15 +75,20 @@ def load_callable(spec: str, what: str = "function", base: str | Path | None = N
                 raise ValueError(f"{what}: module '{mod_name}' is not a .py file or package in "
                                  f"{' or '.join(str(p) for p in dict.fromkeys(places))}; a scene runs only code of "
                                  "its own from there, never an installed module")
+            if confined and not _inside(found, places):
+                raise ValueError(f"{what}: module '{mod_name}' leads outside "
+                                 f"{' and '.join(repr(str(p)) for p in dict.fromkeys(places))} (a symlink?); a "
+                                 "scene runs only code of its own from its folder or the current directory")
         found = found.resolve()
         key = f"_poincare_user_{abs(hash(str(found)))}"
         module = sys.modules.get(key)
+        from .stop import guarded
         if module is None:
             spec_ = importlib.util.spec_from_file_location(key, found)
             module = importlib.util.module_from_spec(spec_)
             sys.modules[key] = module
             try:
-                spec_.loader.exec_module(module)
+                guarded(spec_.loader.exec_module, f"{what} '{spec}'")(module)
             except BaseException:
                 del sys.modules[key]
                 raise
@@ -81,4 +100,5 @@ def load_callable(spec: str, what: str = "function", base: str | Path | None = N
     if not callable(fn):
         raise ValueError(f"{what}: '{mod_name}' has no function '{func_name}'")
     LOADED[(what, spec)] = f"{found}:{func_name}"
-    return fn
+    from .stop import guarded
+    return guarded(fn, f"{what} '{spec}'")

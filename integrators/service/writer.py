@@ -102,11 +102,13 @@ class Replacement:
 
 def close_quietly(f):
     """Flush and close ``f``, whatever fails (on the way out of a failed run)."""
-    try:
-        f.flush()
-    except Exception:
-        pass
-    try:
-        f.close()
-    except Exception:
-        pass
+    from .stop import critical
+    with critical():
+        try:
+            f.flush()
+        except Exception:
+            pass
+        try:
+            f.close()
+        except Exception:
+            pass
