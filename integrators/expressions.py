@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import ast
 import math
+import tomllib
 
 import sympy
 
 MAX_LENGTH = 2000
 MAX_EXPONENT = 64
 MAX_BITS = 4096
+MAX_DEPTH = 100          # operators and calls nested in one expression
+MAX_TOML_DEPTH = 32      # arrays and inline tables nested in a data file
 
 FUNCTIONS = {
     "sqrt": sympy.sqrt, "exp": sympy.exp, "log": sympy.log, "sin": sympy.sin, "cos": sympy.cos,
@@ -65,7 +68,64 @@ def parse_expression(text, where: str, names: dict | None = None):
         tree = ast.parse(text.strip().replace("^", "**"), mode="eval")     # x^2 is a power, as in sympy
     except SyntaxError:
         raise ExpressionError(f"{where}: cannot read '{text}' as an expression") from None
-    return _Walker(where, text, names).visit(tree.body)
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"{where}: the expression is nested more than {MAX_DEPTH} deep") from None
+    try:
+        e = _Walker(where, text, names).visit(tree.body)
+    except RecursionError:
+        raise ExpressionError(f"{where}: the expression is nested more than {MAX_DEPTH} deep") from None
+    for a in e.atoms(sympy.Number):          # 1e308*1e308 is one exact number: it must be a double
+        try:
+            if math.isinf(float(a)):
+                raise OverflowError
+        except OverflowError:
+            raise ExpressionError(f"{where}: '{text}' holds a number beyond the range of a double "
+                                  f"(|x| > {1.7976931348623157e308:.4g})") from None
+        except TypeError:
+            pass
+    return e
+
+
+def load_toml(text: str, where: str) -> dict:
+    """``tomllib.loads(text)`` with arrays and inline tables nested at most :data:`MAX_TOML_DEPTH`
+    deep (deeper ones would exhaust the reader's recursion): a ValueError starting with ``where``
+    for that and for TOML that does not read."""
+    depth = _toml_depth(text)
+    if depth > MAX_TOML_DEPTH:
+        raise ValueError(f"{where}: not valid here: arrays or inline tables nested {depth} deep "
+                         f"(at most {MAX_TOML_DEPTH})")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{where}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ValueError(f"{where}: not valid here: arrays or inline tables nested too deep "
+                         f"(at most {MAX_TOML_DEPTH})") from None
+
+
+def _toml_depth(text: str) -> int:
+    """The deepest nesting of brackets and braces in TOML ``text`` outside strings and comments."""
+    depth = most = 0
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+        elif c in "\"'":
+            quote = text[i:i + 3] if text[i:i + 3] in ('"""', "'''") else c
+            i += len(quote)
+            while i < n and not text.startswith(quote, i):
+                i += 2 if (text[i] == "\\" and quote[0] == '"') else 1
+            i += len(quote)
+            continue
+        elif c in "[{":
+            depth += 1
+            most = max(most, depth)
+        elif c in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    return most
 
 
 def _bad(where, text):
@@ -80,7 +140,10 @@ class _Walker:
         raise ExpressionError(f"{self.where}: {what} is not allowed in '{self.text}' "
                               "(numbers, + - * / **, parentheses and the documented functions only)")
 
-    def visit(self, node):
+    def visit(self, node, depth=0):
+        if depth > MAX_DEPTH:
+            raise ExpressionError(f"{self.where}: the expression is nested more than {MAX_DEPTH} deep")
+        depth += 1
         if isinstance(node, ast.Constant):
             v = node.value
             if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -100,10 +163,10 @@ class _Walker:
             raise ExpressionError(f"{self.where}: unknown name '{node.id}' in '{self.text}'"
                                   + (f" (known: {', '.join(allowed)})" if allowed else ""))
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.UAdd, ast.USub)):
-            v = self.visit(node.operand)
+            v = self.visit(node.operand, depth)
             return -v if isinstance(node.op, ast.USub) else v
         if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
-            left, right = self.visit(node.left), self.visit(node.right)
+            left, right = self.visit(node.left, depth), self.visit(node.right, depth)
             if isinstance(node.op, ast.Pow):
                 if right.is_number and not (abs(right) <= MAX_EXPONENT):
                     self.fail(f"the exponent {right}")
@@ -118,7 +181,7 @@ class _Walker:
                 self.fail(f"the call '{ast.unparse(fn)}(…)'")
             if node.keywords:
                 self.fail("a keyword argument")
-            args = [self.visit(a) for a in node.args]
+            args = [self.visit(a, depth) for a in node.args]
             try:
                 return FUNCTIONS[fn.id](*args)
             except (TypeError, ValueError) as exc:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import tomllib
 from pathlib import Path
 
 import mpmath
@@ -331,9 +330,17 @@ def make_tableau(name, a, b, c, *, abar=None, d=None, order=None, mp=None) -> Ta
         Ab = abar if hasattr(abar, 'rows') else mp.matrix([[mp.mpf(x) for x in row] for row in abar])
     dd = None if d is None else [mp.mpf(x) for x in d]
     if dd is None and abs(mp.det(A)) < mp.mpf(10) ** -30:
+        if all(A[i, j] == 0 for i in range(s) for j in range(i, s)):
+            raise ValueError(f"tableau {name}: a is strictly lower triangular, an explicit Runge–Kutta method "
+                             "(RK4, Euler, Heun): explicit methods are not variational PRK tableaus. A tableau "
+                             "here needs a invertible (Gauss–Legendre, Radau IIA, SRK3) or, where a is singular "
+                             "as in Lobatto IIIA, the constraint weights d of eq:vprk_lobatto; an explicit "
+                             "method runs as your own step map (run.step_maps)")
         raise ValueError(f"tableau {name}: a is singular (its velocity stages are linearly dependent, as in "
-                         "Lobatto IIIA/IIIB), so the stage equations need the constraint vector d of "
-                         "eq:vprk_lobatto: give d")
+                         "Lobatto IIIA, whose first row is zero), so the stage equations need the constraint "
+                         "0 = Σ d_i V_i of eq:vprk_lobatto: give d, s numbers (Lobatto IIIA with 2, 3, 4 "
+                         "stages: d = [1, -1], [1/2, -1, 1/2], [1, -sqrt(5), sqrt(5), -1]); abar, when "
+                         "given (a IIIA/IIIB pair), is the momentum stages' matrix")
     if dd is not None and len(dd) != s:
         raise ValueError(f"tableau {name}: d must have s = {s} entries, got {len(dd)}")
     a_hi, a_lo = _split(mp, A)
@@ -452,13 +459,18 @@ def tableau_from_file(path) -> Tableau:
 
     Numbers may be TOML floats or strings evaluated exactly, e.g. ``"1/2 - sqrt(15)/10"``.
     """
+    from .expressions import load_toml
     path = Path(path)
+    if path.exists() and not path.is_file():      # a FIFO would be read for ever
+        raise ValueError(f"tableau file '{path}' is not a regular file")
     try:
-        data = tomllib.loads(path.read_text())
+        data = load_toml(path.read_text(encoding="utf-8"), f"tableau file '{path}'")
     except FileNotFoundError:
         raise ValueError(f"tableau file '{path}' not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"tableau file '{path}': {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"tableau file '{path}' is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"cannot read tableau file '{path}': {exc.strerror or exc}") from None
     allowed = {"name", "a", "b", "c", "abar", "d", "order"}
     extra = set(data) - allowed
     if extra:
@@ -469,10 +481,17 @@ def tableau_from_file(path) -> Tableau:
     name = data.get("name", path.stem)
     if not isinstance(name, str):
         raise ValueError(f"tableau file '{path}': 'name' must be a string, got {name!r}")
+    clash = next((t for t in TABLEAU_NAMES if t.casefold() == name.strip().casefold()), None)
+    if clash is not None:                 # it would run, and be written and plotted, as the built-in
+        raise ValueError(f"tableau file '{path}' is named '{name}', the name of the built-in tableau {clash}: "
+                         "give it a name of its own (name = \"...\")"
+                         + ("" if "name" in data else ", or rename the file"))
     for key, depth in (("a", 2), ("abar", 2), ("b", 1), ("c", 1), ("d", 1)):
         v = data.get(key)
         if v is not None and not (isinstance(v, list) and (depth == 1 or all(isinstance(r, list) for r in v))):
             raise ValueError(f"tableau file '{path}': '{key}' must be a {'list of lists' if depth == 2 else 'list'}")
+    if not data["a"] or not data["b"] or not data["c"]:
+        raise ValueError(f"tableau file '{path}': 'a', 'b' and 'c' must be non-empty (a tableau has at least one stage)")
     order = data.get("order")
     if order is not None and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
         raise ValueError(f"tableau file '{path}': 'order' must be a positive integer, got {order!r}")

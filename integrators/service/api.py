@@ -18,7 +18,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-import tomllib
 from pathlib import Path
 
 from .scene import RUN_KEYS, SceneError, parse_scene, scene_source
@@ -91,10 +90,11 @@ def run(scene="default", output=None, *, resume=False, force=False, threads=None
                          f"{', '.join(RUN_KEYS)}")
     if overrides:
         if data is None:
+            from ..expressions import load_toml
             try:
-                data = tomllib.loads(text)
-            except tomllib.TOMLDecodeError as exc:
-                raise SceneError(f"{origin or '<scene>'}: not valid TOML: {exc}") from None
+                data = load_toml(text, origin or "<scene>")
+            except ValueError as exc:
+                raise SceneError(str(exc)) from None
         run_table = data.setdefault("run", {})
         if not isinstance(run_table, dict):
             raise SceneError("[run] must be a table")
@@ -105,12 +105,35 @@ def run(scene="default", output=None, *, resume=False, force=False, threads=None
     if threads is not None and not (isinstance(threads, int) and 1 <= threads <= max_threads()):
         raise ValueError(f"threads must be between 1 and {max_threads()} (the cores numba can use here), "
                          f"got {threads!r}")
+    if output is not None and not str(output).strip():
+        raise ValueError("output is empty: give a file name (or None for the scene's output.path)")
     out = Path(output or sc.output)
     comm = communicator()
-    run_driver(sc, out, resume=resume, force=force, comm=comm, progress=progress, threads=threads,
-               version=_version())
+    try:
+        run_driver(sc, out, resume=resume, force=force, comm=comm, progress=progress, threads=threads,
+                   version=_version())
+    except (ValueError, OSError) as exc:
+        raise _in_python_words(exc) from None
     comm.Barrier()                     # rank 0 has written the statuses: every rank reads the same file
     return read_run(out)
+
+
+def _in_python_words(exc):
+    """``exc`` (the same class) with the command line's advice in a Python caller's words:
+    ``--resume`` is ``resume=True``, ``--force`` is ``force=True``, ``--steps N`` is ``steps=N``."""
+    import re
+    text = str(exc)
+    said = re.sub(r"--steps (\d+)", r"steps=\1", text).replace("--resume", "resume=True").replace("--force",
+                                                                                             "force=True")
+    if said == text:
+        return exc
+    try:
+        new = type(exc)(said)
+    except Exception:
+        return exc
+    if hasattr(exc, "reason"):
+        new.reason = exc.reason
+    return new
 
 
 def _version():

@@ -42,7 +42,7 @@ A scene file::
     projections = ["none", "standard", "symmetric", "symplectic", "midpoint"]
     step_maps = ["mymaps.py:leapfrog"]    # optional: your batched step(q, p, lam, h, system) -> (q, p, lam)
                                           # (the audit's contract), run as the pair "leapfrog-map"
-    h = 10.0
+    h = 10.0                              # in [1e-150, 1e150]: h² a normal double
     steps = 1000
     output_every = 10                     # steps between outputs (default steps/100); when steps is not a
                                           # multiple, the last interval is shorter and ends at run.steps
@@ -71,7 +71,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +86,7 @@ SCENE_DIR = Path(__file__).parent / "scenes"
 
 CHECKPOINT_SECONDS = 60.0          # default of output.checkpoint_seconds
 MAX_STEPS = 2**53                  # run.steps and --steps: every step number k, and so t = k·h, exact in double
+H_RANGE = (1e-150, 1e150)          # run.h: h² a normal double, t = k·h finite for every k ≤ MAX_STEPS
 
 
 class SceneError(ValueError):
@@ -350,10 +350,11 @@ def _names(values, allowed, key, check=None):
 
 def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     """Validate TOML text into a Scene; raises SceneError naming the key."""
+    from ..expressions import load_toml
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{origin}: not valid TOML: {exc}") from None
+        data = load_toml(text, origin)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     if isinstance(data.get("system"), str):       # system = "module:function"
         data["system"] = {"function": data["system"]}
     _check_table(data, "")
@@ -429,6 +430,9 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     h = float(run["h"])
     if not math.isfinite(h) or h <= 0:
         raise SceneError(f"run.h must be a finite positive number, got {run['h']!r}")
+    if not H_RANGE[0] <= h <= H_RANGE[1]:
+        raise SceneError(f"run.h = {run['h']!r} is outside [{H_RANGE[0]:g}, {H_RANGE[1]:g}] (the corrected forms "
+                         "and the projections take h², which must be a normal double)")
     steps = run["steps"]
     if not 0 < steps <= MAX_STEPS:
         raise SceneError(f"run.steps must be between 1 and 2^53 = {MAX_STEPS:,} (step times exact in double), "
@@ -732,6 +736,8 @@ def scene_source(spec: str | None) -> tuple:
         path = Path(spec)
         if not path.exists():
             raise SceneError(f"scene '{spec}' is neither a file nor a built-in scene ({', '.join(scenes)})")
+        if not path.is_file():            # a directory, a FIFO (reading it would wait for ever), a device
+            raise SceneError(f"scene '{spec}' is not a regular file")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
