@@ -224,6 +224,10 @@ def _body_plain(exprs, targets, qsyms, params, indent):
 _LOADED = {}
 
 
+class CacheError(ValueError):
+    """The engine's code cache ($POINCARE_CACHE) cannot be written: one line naming it."""
+
+
 def _load(system):
     key = getattr(system, "_engine_key", None)
     if key is None:
@@ -233,10 +237,15 @@ def _load(system):
     folder = cache_dir() / "kernels"
     path = folder / f"system_{key}.py"
     if not path.exists():
-        folder.mkdir(parents=True, exist_ok=True)
         tmp = folder / f".system_{key}.{os.getpid()}.tmp"
-        tmp.write_text(generate_source(system))
-        os.replace(tmp, path)           # atomic: MPI ranks generating together never see half a file
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp.write_text(generate_source(system))
+            os.replace(tmp, path)           # atomic: MPI ranks generating together never see half a file
+        except OSError as exc:
+            where = "$POINCARE_CACHE" if os.environ.get("POINCARE_CACHE") else "the engine's cache"
+            raise CacheError(f"cannot write {where} '{folder}' ({exc.strerror or exc}): the generated code of "
+                             "each system is kept there; set POINCARE_CACHE to a folder you can write") from None
     spec = importlib.util.spec_from_file_location(f"poincare_system_{key}", path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod         # numba's cache finds a function's module by name

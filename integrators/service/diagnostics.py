@@ -72,6 +72,7 @@ class Diagnostics:
         self.scene, self.system = scene, system
         H0, P0 = _scalars(system, q0)
         self.H0 = H0
+        self.scale = energy_scale(H0)
         self.P0 = P0 if "momentum" in scene.diagnostics else None
 
     def point_errors(self, q, p, live) -> dict:
@@ -84,7 +85,7 @@ class Diagnostics:
         out = np.zeros(3)
         _point_errors(scalar_function(sy), ev, _params(sy), np.ascontiguousarray(q, dtype=float),
                       np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(live, dtype=np.uint8), self.H0,
-                      self.H0 if self.P0 is None else self.P0, out, np.empty(2), np.empty(d), np.empty(d * d),
+                      self.scale, self.H0 if self.P0 is None else self.P0, out, np.empty(2), np.empty(d), np.empty(d * d),
                       np.empty(d * d * d), np.empty(d), np.empty(d * d))
         names = (("energy", "energy_error", 0), ("momentum", "momentum_error", 1),
                  ("constraint", "constraint_error", 2))
@@ -162,6 +163,13 @@ class Diagnostics:
         return self.combine(t, [self.point_errors(q, p, live)], values)
 
 
+def energy_scale(H0):
+    """The scale of each point's energy error |H − H0|/scale: |H0|, a relative error, and 1 where
+    H0 = 0 (an absolute error: a relative one has no scale there, and would be NaN at every output)."""
+    H0 = np.asarray(H0, dtype=float)
+    return np.where(H0 != 0, np.abs(H0), 1.0)
+
+
 def _params(system):
     return np.array([float(v) for v in system.params.values()] or [0.0])
 
@@ -182,9 +190,9 @@ def _scalars_at(scalars, k, q, out):
 
 
 @njit(cache=True, error_model="numpy")
-def _point_errors(scalars, ev, k, q, p, live, H0, P0, out, hp, th, T, TT, dH, HH):
-    """out = max over live points of |(H − H0)/H0|, |P − P0|, max_i |p_i − ϑ_i(q)| (a NaN wins, as
-    numpy's max lets it)."""
+def _point_errors(scalars, ev, k, q, p, live, H0, scale, P0, out, hp, th, T, TT, dH, HH):
+    """out = max over live points of |H − H0|/scale (:func:`energy_scale`: |H0|, or 1 where H0 = 0),
+    |P − P0|, max_i |p_i − ϑ_i(q)| (a NaN wins, as numpy's max lets it)."""
     n, d = q.shape
     for j in range(3):
         out[j] = 0.0
@@ -198,6 +206,6 @@ def _point_errors(scalars, ev, k, q, p, live, H0, P0, out, hp, th, T, TT, dH, HH
             v = abs(p[i, m] - th[m])
             if v != v or v > c:
                 c = v
-        for j, v in ((0, abs((hp[0] - H0[i]) / H0[i])), (1, abs(hp[1] - P0[i])), (2, c)):
+        for j, v in ((0, abs(hp[0] - H0[i]) / scale[i]), (1, abs(hp[1] - P0[i])), (2, c)):
             if out[j] == out[j] and (v != v or v > out[j]):
                 out[j] = v

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import secrets
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -39,7 +40,7 @@ from .clocks import Spent, pair_clock
 from .diagnostics import Diagnostics
 from .ranks import Planner, communicator, default_threads, split
 from .refine import Refiner
-from .stop import StopRequest  # noqa: F401  (run's stop argument; tests make one)
+from .stop import StopRequest, critical  # noqa: F401  (run's stop argument; tests make one)
 from .tasks import Batch, Output, Tasks
 from .transport import PARTS, PIECES, Transport
 from .writer import Replacement, Writer, close_quietly
@@ -119,6 +120,21 @@ def _check_output(path, resume, force):
     return None
 
 
+def _trial_output(scene, system, q0):
+    """The first output's row computed once on the scene's own values before any file is opened
+    (README: a scene that fails, fails before the file): a one-line reason, or None.  Non-finite
+    values are a run's business (breakdowns, NaN rows); an exception here is a scene the run could
+    not record (an overflow in a form's h², a user's function that raises)."""
+    try:
+        with np.errstate(all="ignore"):
+            Diagnostics(scene, system, q0).row(0.0, q0, system.theta(q0), np.zeros_like(q0),
+                                               np.ones(q0.shape[0], dtype=bool))
+    except Exception as exc:
+        return f"scene '{scene.name}': its first output cannot be computed ({type(exc).__name__}: " \
+            f"{str(exc).splitlines()[0] if str(exc) else ''}); nothing was written"
+    return None
+
+
 def _resume_plan(path, scene):
     """Check that ``path`` was written by ``scene`` (or by the same scene with fewer steps)."""
     from .scene import parse_scene, scene_differences
@@ -184,9 +200,11 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
 
     system = scene.system()
     error = None
+    from ..engine import CacheError, point_functions
     try:                               # the engine's code for this system, compiled before any file is touched
-        from ..engine import point_functions
         point_functions(system)
+    except CacheError as exc:
+        error = str(exc)
     except Exception as exc:
         error = f"system {system.name}: the step engine cannot be compiled for it: {type(exc).__name__}: " \
             f"{str(exc).splitlines()[0] if str(exc) else ''}"
@@ -195,12 +213,18 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         raise ValueError(error)
     q0 = scene.points(system)
     n = q0.shape[0]
+    error = _trial_output(scene, system, q0) if rank == 0 else None
+    error = comm.bcast(error, root=0)
+    if error:
+        raise ValueError(error)
 
     f = None
     todo = []
     replacing = None                   # --force over an existing file: written beside it, renamed over it once started
     token = secrets.token_hex(4)       # names this run's checkpoint slabs (rank 0's, sent with the pairs to run)
     if rank == 0:
+        crit = critical()
+        crit.__enter__()
         try:
             if scene.checkpoints == "per-rank":
                 folder = output.state_dir(path)
@@ -209,7 +233,19 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 except OSError as exc:
                     raise output.OutputError(f"cannot make the checkpoint folder '{folder}' "
                                              f"(output.checkpoints = \"per-rank\"): {output.plain_error(exc)}") from None
-            if resume:
+            if resume and grown_from is not None:
+                # an extension works on a copy, which replaces the file once its first new rows are
+                # written: a failure before that leaves the finished file byte for byte as it was
+                replacing = Replacement(path.resolve())
+                try:
+                    shutil.copyfile(path, replacing.new)
+                    shutil.copymode(path, replacing.new)
+                except OSError as exc:
+                    replacing.abandon()
+                    raise output.OutputError(f"cannot extend '{path}': its working copy cannot be written "
+                                             f"({output.plain_error(exc)}); the file is as it was") from None
+                f = output.reopen(replacing.new, scene)
+            elif resume:
                 f = output.reopen(path, scene)
             else:
                 target = path
@@ -217,6 +253,9 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                     replacing = Replacement(path.resolve())      # (through a symlink: its target)
                     target = replacing.new
                 f = output.create(target, scene, version, n, State.schema(n, system.d, scene.max_stages), UNDER_RESOLVED)
+            if "energy" in scene.diagnostics:       # where a relative energy error has no scale
+                from .diagnostics import _scalars
+                output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
             for tab, proj in scene.pairs:
                 todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
                                                 finished_too=grown_from is not None))
@@ -228,6 +267,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
             if f is not None:
                 close_quietly(f)
+        finally:
+            crit.__exit__(None, None, None)
     # the pairs to run go to every rank without their saved states (a state is every point's:
     # 314 bytes a point and pair); each rank gets its own rows of one when its pair begins
     sent = todo if rank != 0 or isinstance(todo, Exception) else \
@@ -239,6 +280,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         if replacing is not None:
             replacing.abandon()
         raise todo
+    retry = "the same command (--resume)" if resume else "--force"   # after a failure before the file was replaced
 
     timings = {}
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
@@ -262,16 +304,19 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
             for c, s in zip(last["per_rank"], ends):
                 c["wait_end"] = s
         comm.Barrier()
-    except output.OutputError:
-        if f is not None:
-            close_quietly(f)
-        if replacing is not None:
-            replacing.abandon()
-        raise
     except (OSError, RuntimeError) as exc:      # h5py raises RuntimeError for some failed writes
         if f is not None:
             close_quietly(f)
-        raise output.OutputError(f"writing '{path}' failed: {output.plain_error(exc)}; every output before "
+        kept = replacing is not None and not replacing.done
+        if replacing is not None:
+            replacing.abandon()
+        reason = getattr(exc, "reason", None) or output.plain_error(exc)
+        if kept:                  # --force or an extension that never replaced the file: it is as it was
+            raise output.OutputError(f"writing '{path}' failed: {reason}; '{path}' is as it was before this run: "
+                                     f"free space, then run {retry} again") from None
+        if isinstance(exc, output.OutputError):
+            raise
+        raise output.OutputError(f"writing '{path}' failed: {reason}; every output before "
                                  "the failure is in the file (free space, then --resume)") from None
     except BaseException:
         if f is not None:
@@ -283,10 +328,11 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         bar.close()
     if rank != 0:
         return None
-    f.close()
-    if replacing is not None:      # (a scene with no pair to run has written no rows)
-        replacing.commit()
-    summaries = finalize(path, scene)
+    with critical():
+        f.close()
+        if replacing is not None:      # (a scene with no pair to run has written no rows)
+            replacing.commit()
+        summaries = finalize(path, scene)
     for s_ in summaries:
         s_.timings = timings.get(s_.pair, {})
     return summaries
@@ -585,9 +631,10 @@ class _Stream:
             self.planner.rates.update((r, m[1]) for r, m in zip(others, msgs))
             b.pair.clock["wait_recv"] += wait
             self.spent.charge(b.pair.clock, "gather", wait)
-            self.writer.write(b, [mine] + [m[0] for m in msgs])
-            if b.last:
-                self.planner.after_pair(self.writer.finish_pair(b.pair, [m[2] for m in msgs]))
+            with critical():            # (the stop watchdog never ends the process mid-write)
+                self.writer.write(b, [mine] + [m[0] for m in msgs])
+                if b.last:
+                    self.planner.after_pair(self.writer.finish_pair(b.pair, [m[2] for m in msgs]))
 
     def drain(self):
         """At the run's end: every queued task run, every batch written, every message delivered."""

@@ -12,7 +12,8 @@ Layout (format ``poincare/2``)::
         points_used/I1, points_used/I2 (n,) a set with refine_to: the points of the level its invariant
                                            was taken on (the coarsest that resolved it; integrators.service.refine);
                                            attrs: points (the scene's own), refine_to
-        energy_error        (n,)       max over points of |H − H₀|/|H₀|
+        energy_error        (n,)       max over points of |H − H₀|/|H₀| (|H − H₀| where H₀ = 0: the
+                                       root attributes energy_error, energy_absolute_points say so)
         momentum_error      (n,)       max over points of |P − P₀|
         constraint_error    (n,)       max over points of |p − ϑ(q)|
         breakdown_time      (npoints,) per point, inf = never (loop points first, then the surface row by row)
@@ -64,6 +65,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import errno
 import json
 import os
 import re
@@ -119,14 +121,21 @@ def open_file(path, mode="r"):
         raise FileNotFoundError(f"'{path}' does not exist")
     try:
         return h5py.File(path, mode)
-    except BlockingIOError:
-        raise BusyFile(f"'{path}' is open for writing by another process (a run still going?): wait for it to "
-                       "finish or stop it first") from None
     except OSError as exc:
-        if "lock" in str(exc):
-            raise BusyFile(f"'{path}' is locked by another process (a run still going?): wait for it to finish "
-                           "or stop it first") from None
+        if is_lock_error(exc):
+            raise BusyFile(f"'{path}' is open for writing by another process (a run still going?): wait for it "
+                           "to finish or stop it first") from None
         raise DamagedFile(f"cannot read '{path}': damaged or not an HDF5 run file ({plain_error(exc)})") from None
+
+
+def is_lock_error(exc) -> bool:
+    """Whether an error from opening an HDF5 file is its lock, held by another process (EAGAIN from
+    HDF5's flock), and not a damaged file: HDF5's message for a bad superblock names the 'sblock'
+    (a substring test for 'lock' once took a truncated file for a locked one)."""
+    if isinstance(exc, BlockingIOError) or getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+        return True
+    text = str(exc)
+    return bool(re.search(r"unable to lock file|errno = (11|35)\b|Resource temporarily unavailable", text))
 
 
 def check_size(ds, limit):
@@ -183,9 +192,12 @@ def ensure_space(path, nbytes, where):
     free = available_bytes(path)
     if free < nbytes + SPACE_MARGIN:
         held = f"the file holds every output up to {where}" if where else "the file holds no output yet"
-        raise OutputError(f"no space left for '{path}' ({free / 2**20:.2f} MiB available, the next output "
-                          f"needs about {(nbytes + SPACE_MARGIN) / 2**20:.2f} MiB); {held}: free space, then run "
-                          "again with --resume")
+        reason = (f"no space left ({free / 2**20:.2f} MiB available, the next output needs about "
+                  f"{(nbytes + SPACE_MARGIN) / 2**20:.2f} MiB)")
+        err = OutputError(f"{reason.replace('no space left', f'no space left for {str(path)!r}', 1)}; {held}: "
+                          "free space, then run again with --resume")
+        err.reason = reason
+        raise err
 
 
 def _series(g, name, dtype="f8"):
@@ -195,8 +207,11 @@ def _series(g, name, dtype="f8"):
 def create(path, scene, version, npoints, state_shapes, threshold):
     """Create the file with every group and dataset of the scene (OutputError in one line if it cannot)."""
     try:
-        f = h5py.File(path, "w")
+        f = h5py.File(path, "x")          # never over a file another run made since it was checked
     except OSError as exc:
+        if is_lock_error(exc) or isinstance(exc, FileExistsError) or os.path.exists(path):
+            raise BusyFile(f"output '{path}' was just created by another process (two runs started at once?): "
+                           "give each run its own -o") from None
         raise OutputError(f"cannot create output '{path}': {plain_error(exc)}") from None
     try:
         _layout(f, scene, version, npoints, state_shapes, threshold)
@@ -550,10 +565,10 @@ def open_for_resume(path):
     """Reopen an interrupted run for writing; the caller has checked its scene."""
     try:
         f = h5py.File(path, "r+")
-    except BlockingIOError:
-        raise BusyFile(f"cannot resume '{path}': it is open for writing by another process (a run still "
-                       "going?)") from None
     except OSError as exc:
+        if is_lock_error(exc):
+            raise BusyFile(f"cannot resume '{path}': it is open for writing by another process (a run still "
+                           "going?)") from None
         raise OutputError(f"cannot resume '{path}': {plain_error(exc)}") from None
     if f.attrs.get("format") != FORMAT:
         found = f.attrs.get("format")
@@ -649,6 +664,14 @@ def reopen(path, scene):
     f.attrs["scene"] = scene.text          # a grown run.steps is now the file's scene
     f.attrs["steps"] = scene.steps
     return f
+
+
+def note_energy_scale(f, absolute, points):
+    """Root attributes saying what ``energy_error`` measures: relative |H − H₀|/|H₀|, and absolute
+    |H − H₀| at the ``absolute`` points where H₀ = 0 (diagnostics.energy_scale)."""
+    f.attrs["energy_absolute_points"] = absolute
+    f.attrs["energy_error"] = "max over live points of |H - H0|/|H0|" + (
+        f"; |H - H0| (absolute) at the {absolute} of {points} points where H0 = 0" if absolute else "")
 
 
 def pair_group(f, name):
@@ -818,8 +841,15 @@ class PairRun:
                 f"{self.breakdown_time.size} points broke down>")
 
     def relative_error(self, inv="I1", form="noncanonical"):
-        """|I(t) − I(0)| / |I(0)| of one invariant and form (:func:`relative_error`)."""
-        return relative_error((self.I1 if inv == "I1" else self.I2)[form])
+        """|I(t) − I(0)| / |I(0)| of one invariant ("I1" or "I2") and form (:func:`relative_error`);
+        a ValueError names an invariant or form the run does not hold."""
+        if inv not in ("I1", "I2"):
+            raise ValueError(f"invariant {inv!r}: choose 'I1' (the loop's) or 'I2' (the surface's)")
+        values = self.I1 if inv == "I1" else self.I2
+        if form not in values:
+            held = ", ".join(sorted(values)) or "none: the scene has no " + ("loop" if inv == "I1" else "surface")
+            raise ValueError(f"{inv} form {form!r} is not in this run (it holds: {held})")
+        return relative_error(values[form])
 
     def to_xarray(self, forms=None):
         """The pair as an ``xarray.Dataset`` over time ``t`` (and ``form``, ``point``): ``I1``, ``I2``

@@ -13,6 +13,7 @@
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import matplotlib
@@ -117,11 +118,12 @@ def _diagnostics(run, out):
                 law = pr.growth.get(d, ("",))[0]
                 ax.semilogy(pr.t, np.maximum(pr.errors[d], FLOOR), lw=0.8, label=f"{name}: {law}" if law else name,
                             ls=("-", "--", ":", "-.")[k // 10 % 4])
-        ax.set_title(f"{d} error" + (" (relative)" if d == "energy" else ""), fontsize=10)
+        ax.set_title(f"{d} error" + (" (relative; absolute where H0 = 0)" if d == "energy" else ""), fontsize=10)
         ax.set_xlabel("t")
         ax.grid(True, lw=0.3)
     for ax in axes[0]:                      # each panel's own legend: the pairs with that error's growth law
-        ax.legend(fontsize=5.5, ncol=2, loc="lower right")
+        if ax.get_legend_handles_labels()[0]:      # (none before any pair wrote a row)
+            ax.legend(fontsize=5.5, ncol=2, loc="lower right")
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
@@ -129,11 +131,12 @@ def _diagnostics(run, out):
 
 
 def _points(run, out):
-    names = [n for n, pr in run.pairs.items() if pr.points]
+    rows = {n: min([pr.t.size] + [len(v) for v in pr.points.values()]) for n, pr in run.pairs.items() if pr.points}
+    names = [n for n, k in rows.items() if k > 0]      # (a run stopped before a pair's first row: none)
     if not names:
         return False
     pr = run.pairs[names[0]]
-    t = pr.t
+    t = pr.t[:rows[names[0]]]
     picks = np.unique(np.linspace(0, len(t) - 1, 5).round().astype(int))
     fig, ax = plt.subplots(figsize=(6, 5))
     for k, idx in enumerate(picks):
@@ -162,7 +165,12 @@ def plot_file(path, outdir=None):
     if not path.exists():
         raise ValueError(f"'{path}' does not exist")
     outdir = Path(outdir) if outdir else path.parent
-    outdir.mkdir(parents=True, exist_ok=True)
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"cannot make the plot folder '{outdir}': {exc.strerror or exc}") from None
+    if not os.access(outdir, os.W_OK | os.X_OK):
+        raise ValueError(f"cannot write plots in '{outdir}' (permission denied): give another folder with -o")
     run = read_run(path)
     if not run.pairs:
         raise ValueError(f"'{path}' holds no runs")
