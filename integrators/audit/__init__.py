@@ -28,7 +28,9 @@ Two measurements (docs/audit.md has the thresholds and the table for the built-i
     some output and max e is above round-off, so e may be sampling error: refine the loop or surface;
   - otherwise the growth law in the audit's words: ``round-off`` (max e ≤ ``ROUNDOFF``),
     ``bounded``, ``random walk``, ``drifting`` (linear), ``growing`` (faster than linear), or
-    ``undetermined`` (fewer than 5 outputs).
+    ``undetermined`` (fewer than 5 outputs).  A verdict whose max e lies within ``NEAR_FLOOR``
+    (10×) above ``ROUNDOFF`` says so (``near_floor`` in the JSON): there a drifting or growing law
+    may be round-off's rather than the method's.
 
 * **One-step symplecticity defect.**  At sample points x = (q, ϑ(q), λ) the Jacobian DΦ of
   x ↦ Φ(x) gives, per form, the pull-back defect (relative to the size of the terms summed,

@@ -12,6 +12,8 @@ from invariants.growth import BOUNDED_BELOW, FASTER_FROM, LINEAR_FROM, growth_la
 
 from .drift import RESOLVED, ROUNDOFF, drift_verdict, run_drift
 
+NEAR_FLOOR = 10.0      # a drift verdict with max e within this factor above ROUNDOFF is said to be near the floor
+
 
 def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method="auto", progress=None,
           drift=True, defect=True):
@@ -41,6 +43,7 @@ def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method
                 g = growth_law(t, err)
                 emax, rate, verdict = drift_verdict(t, err, broke is not None, res, law=g)
                 entry["drift"][key] = {"max_error": emax, "drift_rate": rate, "verdict": verdict, "resolution": res,
+                                       "near_floor": bool(ROUNDOFF < emax <= NEAR_FLOOR * ROUNDOFF),
                                        "growth_law": g.law, "growth_exponent": g.exponent,
                                        "growth_exponent_error": g.exponent_error, "growth_onset": g.onset}
             entry.update(breakdown_step=broke, t=t.tolist(), errors={k: v.tolist() for k, v in series.items()})
@@ -86,8 +89,10 @@ def text_report(report) -> str:
         for key, r in c["drift"].items():
             alpha = r.get("growth_exponent")
             grow = f" (α = {alpha:.2f})" if alpha is not None and math.isfinite(alpha) else ""
+            near = (f"; near the round-off floor ({ROUNDOFF:.0e}): max e within {NEAR_FLOOR:g}x of it, so this "
+                    "law may be round-off's, not the method's" if r.get("near_floor") else "")
             lines.append(f"    {key:18s} {_fmt(r['max_error']):>9s} {_fmt(r['drift_rate'], '+.1e'):>9s} "
-                         f"{_fmt(r['resolution']):>9s}  {r['verdict']}{grow}")
+                         f"{_fmt(r['resolution']):>9s}  {r['verdict']}{grow}{near}")
     lines += ["", "One-step symplecticity defect (relative) for h, h/2, …, fitted order in h, verdict"]
     for c in report["candidates"]:
         lines.append(f"  {c['name']} ({c['role']}, Jacobian by {c['jacobian']})")
