@@ -101,6 +101,11 @@ def test_the_example_notebook_runs(tmp_path):
                             resources={"metadata": {"path": str(tmp_path)}}).execute()
     last = nb.cells[-1].outputs[-1]["data"]["text/plain"]
     assert last == "'not symplectic'"
+    said = [o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.get("name") == "stderr"]
+    assert not any("Warning" in x for x in said), said      # e.g. tqdm's "IProgress not found" (no ipywidgets)
+    widgets = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
+               if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
+    assert widgets, "the run's progress bar is not a widget"
     assert (tmp_path / "tour.h5").exists()
 
 
