@@ -636,6 +636,42 @@ _atan2_overload(np.arctan2)
 _atan2_overload(math.atan2)
 
 
+def as_dd(x):
+    """``x`` as a double-double: itself, or a double (integer) with a zero low part."""
+
+
+@overload(as_dd, inline="never")
+def _as_dd(x):
+    if _is_dd(x):
+        return lambda x: x
+    if _is_num(x):
+        return lambda x: dd(float(x), 0.0)
+
+
+@overload(np.isfinite, inline="never")
+def _isfinite(a):
+    if _is_dd(a):
+        return lambda a: np.isfinite(a.hi) and np.isfinite(a.lo)
+
+
+@overload(np.sign, inline="never")
+def _sign(a):
+    if _is_dd(a):
+        return lambda a: dd(np.sign(a.hi) if a.hi != 0.0 else np.sign(a.lo), 0.0)
+
+
+@njit(**_OPTS)
+def divide_array(x, h):
+    """x / h for a double-double array x (…, 2) and a double h, each value to a double-double."""
+    out = np.empty_like(x)
+    flat, res = x.reshape(-1, 2), out.reshape(-1, 2)
+    hh = dd(h, 0.0)
+    for i in range(flat.shape[0]):
+        r = dd_div(dd(flat[i, 0], flat[i, 1]), hh)
+        res[i, 0], res[i, 1] = r.hi, r.lo
+    return out
+
+
 # -- Python side -------------------------------------------------------------------------------------
 
 def split(x, dps=50) -> tuple:

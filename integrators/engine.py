@@ -114,7 +114,33 @@ class _EnginePrinter:
         return cls._cls(names)
 
 
-def _body(exprs, targets, qsyms, params, indent, known=()):
+class _DDPrinter:
+    """The double-double point functions' printer: :class:`_EnginePrinter` with every number that
+    is not a small integer written as the nearest double-double, ``_dd(hi, lo)``, from its exact
+    value at 50 digits (1/3, π, √2 and 1e-1 as the reals they are, not as doubles)."""
+
+    _cls = None
+
+    @classmethod
+    def make(cls, names):
+        if cls._cls is None:
+            import sympy
+
+            from .ddouble import split
+
+            class Printer(_EnginePrinter.make({}).__class__):
+                def _print(self, expr, **kwargs):
+                    if isinstance(expr, sympy.Basic) and expr.is_number and expr.is_real is not False:
+                        if expr.is_Integer and abs(int(expr)) < 2 ** 53:
+                            return f"{int(expr)}.0" if int(expr) >= 0 else f"({int(expr)}.0)"
+                        hi, lo = split(str(sympy.N(expr, 60)))
+                        return f"_dd({hi!r}, {lo!r})"
+                    return super()._print(expr, **kwargs)
+            cls._cls = Printer
+        return cls._cls(names)
+
+
+def _body(exprs, targets, qsyms, params, indent, known=(), printer=None):
     """Lines ``st(array, index, exprs[i])`` for ``targets[i] = (array, index)``, with common
     subexpressions shared; ``known``: (symbol, expression) pairs already assigned, reused here.
     Returns the lines and the new (symbol, expression) pairs."""
@@ -128,7 +154,7 @@ def _body(exprs, targets, qsyms, params, indent, known=()):
     names.update({k: f"_k{i}" for i, k in enumerate(params)})
     names.update({sym: f"_x{i}" for i, (sym, _) in enumerate(known)})
     names.update({sym: f"_x{len(known) + i}" for i, (sym, _) in enumerate(subs)})
-    pr = _EnginePrinter.make(names)
+    pr = (printer or _EnginePrinter).make(names)
     pad = " " * indent
     lines = [f"{pad}{names[sym]} = {pr.doprint(e)}" for sym, e in subs]
     lines += [f"{pad}st({a}, {i}, {pr.doprint(e)})" for (a, i), e in zip(targets, reduced)]
@@ -148,8 +174,11 @@ def generate_source(system) -> str:
     return cached
 
 
-def _generate_source(system) -> str:
-    from .kernel import LANES
+def _point_body(system, printer=None):
+    """The lines of a point function's body: ϑ, ϑ_q, ∇H (``first``), then ϑ_qq, ∇²H (``second``,
+    under ``if _need:``).  ϑ, ϑ_q and ∇H come from the same lines whether or not the second
+    derivatives are asked for, so their bits never depend on it (a W-lane call computes them for
+    every lane when any lane asks)."""
     d = system.d
     q, params = system.q, list(system.params)
     th = [(("_th", i), system.theta_expr[i]) for i in range(d)]
@@ -159,10 +188,16 @@ def _generate_source(system) -> str:
           for i in range(d) for j in range(d) for l in range(d)]
     HH = [(("_HH", i * d + j), system.ddH_expr[i][j]) for i in range(d) for j in range(d)]
     light, extra = th + T + dH, TT + HH
-    # ϑ, ϑ_q and ∇H come from the same lines whether or not the second derivatives are asked for, so
-    # their bits never depend on it (a W-lane call computes them for every lane when any lane asks)
-    first, known = _body([e for _, e in light], [t for t, _ in light], q, params, 4)
-    second, _ = _body([e for _, e in extra], [t for t, _ in extra], q, params, 8, known)
+    first, known = _body([e for _, e in light], [t for t, _ in light], q, params, 4, printer=printer)
+    second, _ = _body([e for _, e in extra], [t for t, _ in extra], q, params, 8, known, printer=printer)
+    return first, second
+
+
+def _generate_source(system) -> str:
+    from .kernel import LANES
+    d = system.d
+    q, params = system.q, list(system.params)
+    first, second = _point_body(system)
     head = [f"    {a} = lanes({a}, 0, _P)" for a in ("_qin", "_th", "_T", "_TT", "_dH", "_HH")]
     head += [f"    _q{i} = ld(_qin, {i})" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
     body = head + first + ["    if _need:", *second, "        pass"]
@@ -201,6 +236,35 @@ def _generate_source(system) -> str:
     return "\n".join(lines)
 
 
+def generate_dd_source(system) -> str:
+    """The Python source of a system's double-double point function ``evaluate_dd`` (the
+    signature of ``evaluate_real`` on pointers to double-doubles; integrators/ddouble.py), its
+    constants exact to a double-double (:class:`_DDPrinter`).  A module of its own, made only when a
+    double-double run asks for it."""
+    d = system.d
+    q, params = system.q, list(system.params)
+    first, second = _point_body(system, _DDPrinter)
+    head = [f"    {a} = lanes({a}, 0, _P)" for a in ("_qin", "_th", "_T", "_TT", "_dH", "_HH")]
+    head += [f"    _q{i} = ld(_qin, {i})" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
+    scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
+    sbody, _ = _body(scal, [("_out", 0), ("_out", 1)], q, params, 4, printer=_DDPrinter)
+    lines = [f'"""Generated by integrators.engine for the system {system.name!r} (double-double); do not edit."""',
+             "import numpy", "from numba import cfunc, types",
+             "from integrators.ddouble import dd as _dd, dd_t", "from integrators.simd import lanes, ld, st", "",
+             "_F = types.CPointer(types.float64)", "_A = types.CPointer(dd_t)", "_P = (0.0,)", "",
+             "def _evaluate_dd(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *head, *first, "    if _need:", *second,
+             "        pass", "",
+             "evaluate_dd = cfunc(types.void(_A, _F, types.boolean, _A, _A, _A, _A, _A), cache=True, "
+             "error_model='numpy')(_evaluate_dd)", "", "",
+             "def _scalars_dd(_qin, _k, _out):",
+             "    \"\"\"H and the Noether momentum (0 when the system has none) at one point, in double-double.\"\"\"",
+             "    _qin = lanes(_qin, 0, _P)", "    _out = lanes(_out, 0, _P)",
+             *[f"    _q{i} = ld(_qin, {i})" for i in range(d)], *[f"    _k{i} = _k[{i}]" for i in range(len(params))],
+             *sbody, "",
+             "scalars_dd = cfunc(types.void(_A, _F, _A), cache=True, error_model='numpy')(_scalars_dd)", ""]
+    return "\n".join(lines)
+
+
 def sympy_zero():
     import sympy
     return sympy.Float(0.0)
@@ -228,19 +292,22 @@ class CacheError(ValueError):
     """The engine's code cache ($POINCARE_CACHE) cannot be written: one line naming it."""
 
 
-def _load(system):
+def _load(system, precision="double"):
     key = getattr(system, "_engine_key", None)
     if key is None:
         key = system._engine_key = _key(system)       # (sympy's srepr of every expression: once)
+    if precision != "double":
+        key = f"{key}_dd"
     if key in _LOADED:
         return _LOADED[key]
     folder = cache_dir() / "kernels"
     path = folder / f"system_{key}.py"
+    generate_source_ = generate_source if precision == "double" else generate_dd_source
     if not path.exists():
         tmp = folder / f".system_{key}.{os.getpid()}.tmp"
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            tmp.write_text(generate_source(system))
+            tmp.write_text(generate_source_(system))
             os.replace(tmp, path)           # atomic: MPI ranks generating together never see half a file
         except OSError as exc:
             where = "$POINCARE_CACHE" if os.environ.get("POINCARE_CACHE") else "the engine's cache"
@@ -259,10 +326,13 @@ def scalar_function(system):
     return _load(system).scalars
 
 
-def point_functions(system, complex_step=False, lanes=False):
+def point_functions(system, complex_step=False, lanes=False, precision="double"):
     """The compiled (evaluate, inside) pair of ``system`` (generated and compiled once per machine):
     the scalar real or complex-step evaluation, or with ``lanes`` the W-lane one (None where the
-    system has a function without a lane form)."""
+    system has a function without a lane form); with ``precision="double-double"`` the scalar
+    double-double one (its own module, :func:`generate_dd_source`)."""
+    if precision == "double-double":
+        return _load(system, "double-double").evaluate_dd, _load(system).inside
     mod = _load(system)
     ev = mod.evaluate_lanes if lanes else (mod.evaluate_complex if complex_step else mod.evaluate_real)
     return ev, mod.inside
@@ -324,10 +394,32 @@ class State:
         """Start every point's next solve from a fresh Jacobian (done at every checkpoint)."""
         self.have_lu[:] = False
 
+    @classmethod
+    def double_double(cls, q, p, lam, h, s):
+        """A double-double state: ``q``, ``p``, ``lam`` as (n, d, 2) arrays of (hi, lo) pairs (or (n, d)
+        doubles, taken exactly); every value array of the state gets the same last axis of 2 (the
+        kernel reads it as double-doubles: integrators/ddouble.py)."""
+        def pairs(x):
+            x = np.asarray(x, dtype=np.float64)
+            return np.ascontiguousarray(np.stack([x, np.zeros_like(x)], axis=-1) if x.ndim == 2 else x)
+        q2, p2, l2 = pairs(q), pairs(p), pairs(lam)
+        st = cls(q2[..., 0], p2[..., 0], np.zeros(q2.shape[:2]), h, s)
+        st.q, st.p = q2.copy(), p2.copy()
+        st.Lam = np.ascontiguousarray(_dd_times(l2, float(h)))
+        for name in ("q_comp", "p_comp", "mu"):
+            setattr(st, name, np.zeros_like(q2))
+        st.Y = np.zeros(st.Y.shape + (2,))
+        st.lu = np.empty(st.lu.shape + (2,))
+        return st
+
+    @property
+    def precision(self) -> str:
+        return "double-double" if self.q.ndim == 3 else "double"
+
     def _tuple(self, nz):
         if self.lu.shape[1] != nz:
             n = self.q.shape[0]
-            self.lu = np.empty((n, nz, nz), self.q.dtype)
+            self.lu = np.empty((n, nz, nz) + self.q.shape[2:], self.q.dtype)   # (double-double: a last axis of 2)
             self.piv = np.empty((n, nz), np.int64)
             self.have_lu[:] = False
         u8 = lambda x: x.view(np.uint8)
@@ -379,6 +471,29 @@ class Tolerances:
                         dtype=np.float64)
 
 
+def theta_dd(system, q2):
+    """ϑ(q) in double-double at the points q2 (n, d, 2) of (hi, lo) pairs: (n, d, 2)."""
+    q2 = np.ascontiguousarray(q2, dtype=np.float64)
+    n, d = q2.shape[:2]
+    out = np.zeros_like(q2)
+    ev, _ = point_functions(system, precision="double-double")
+    k = np.array([float(v) for v in system.params.values()] or [0.0], dtype=np.float64)
+    from .kernel import theta_dd_points
+    theta_dd_points(ev, k, q2, out, np.zeros(2 * d * d), np.zeros(2 * d * d * d), np.zeros(2 * d), np.zeros(2 * d * d))
+    return out
+
+
+def _dd_times(x, h):
+    """h × x for a double-double array x (…, 2), exactly rounded to double-double."""
+    from .ddouble import split, value
+    if h == 1.0 or not np.any(x):
+        return x.copy() if h == 1.0 else np.zeros_like(x)
+    out = np.empty_like(x)
+    for idx in np.ndindex(x.shape[:-1]):
+        out[idx] = split(value(*x[idx]) * h)
+    return out
+
+
 class Engine:
     """The step map Φ_h of one (tableau, projection) pair for a system, compiled.
 
@@ -405,6 +520,11 @@ class Engine:
             raise ValueError(f"tolerances must be an integrators.engine.Tolerances, got {type(tolerances).__name__}")
         self.tab = kernel.flat_tableau(tableau, predictor(tableau.c, self.tolerances.predictor))
         self._cfg = self.tolerances.array()
+        # double-double: the same rule with TOL and STALL scaled from double's eps to 2^-104
+        scale = 2.0 ** -104 / np.finfo(np.float64).eps
+        self._cfg_dd = self._cfg.copy()
+        self._cfg_dd[0] *= scale
+        self._cfg_dd[1] *= scale
         self._functions = {}
 
     def state(self, q, p=None, lam=None, dtype=np.float64):
@@ -419,6 +539,17 @@ class Engine:
         ``lanes``: W, points advanced together in SIMD lanes (1 or kernel.LANES; None: LANES for
         real states of at least LANES points).  Any choice gives the same bits."""
         from . import kernel
+        if state.q.ndim == 3:                       # a double-double state: the kernel's third specialisation
+            if self.tableau.d is not None:
+                raise ValueError(f"{self.tableau.name}: Lobatto tableaus (d) do not run in double-double yet "
+                                 "(the constraint weights d are held in double only)")
+            if "dd" not in self._functions:
+                self._functions["dd"] = point_functions(self.system, precision="double-double")
+            ev, inside = self._functions["dd"]
+            kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
+                           int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
+                           (0.0,))
+            return
         cplx = bool(np.iscomplexobj(state.q))
         W = lanes if lanes is not None else (kernel.LANES if state.q.shape[0] >= kernel.LANES else 1)
         if W not in (1, kernel.LANES):

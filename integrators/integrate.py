@@ -31,6 +31,9 @@ class Solution:
     newton_iterations : (npoints,) Newton iterations summed over all steps taken
     steps_taken : (npoints,) number of successful steps
     tableau, projection, h : what produced it
+    precision : "double" or "double-double"
+    q_lo, p_lo, lam_lo : with ``precision="double-double"``, the low parts: the result is the exact
+        sum q + q_lo (each pair a double-double, integrators/ddouble.py); None in double
     """
 
     t: np.ndarray
@@ -43,6 +46,10 @@ class Solution:
     tableau: str
     projection: str
     h: float
+    precision: str = "double"
+    q_lo: np.ndarray | None = None
+    p_lo: np.ndarray | None = None
+    lam_lo: np.ndarray | None = None
 
     @property
     def mean_newton_iterations(self) -> float:
@@ -62,7 +69,7 @@ def _as_points(q0, d, what):
 
 def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps=100, save_every=1,
               p0=None, lam0=None, t0=0.0, progress: Callable[[int, int], None] | None = None,
-              chunk: int | None = None) -> Solution:
+              chunk: int | None = None, precision: str = "double") -> Solution:
     """Integrate points of a degenerate Lagrangian system with a (projected) VPRK method.
 
     Parameters
@@ -79,6 +86,12 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     lam0 : (npoints, d) initial λ for the symplectic projection (default 0)
     progress : optional callback(step, steps)
     chunk : points per block of the engine's thread loop (results are bitwise the same for any)
+    precision : ``"double"`` or ``"double-double"``: the same kernel on double-double numbers
+        (about 32 digits; integrators/ddouble.py), one point at a time, Newton to a few
+        double-double ulps; q0, p0, lam0 are taken exactly as doubles, p0 defaults to ϑ(q0) in
+        double-double, and every state comes back as two arrays whose exact sum is the result
+        (``q`` and ``q_lo``, ``p`` and ``p_lo``, ``lam`` and ``lam_lo``).  Lobatto tableaus do not
+        run in double-double yet.
 
     Returns
     -------
@@ -104,27 +117,49 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise ValueError(f"initial point {k} = {q0[k].tolist()} is not finite or outside the domain of {system.name}")
+    p_given = p0
     p0 = system.theta(q0) if p0 is None else _as_points(p0, system.d, "p0").reshape(q0.shape)
     lam0 = np.zeros_like(q0) if lam0 is None else _as_points(lam0, system.d, "lam0").reshape(q0.shape)
+    if precision not in ("double", "double-double"):
+        raise ValueError(f"precision must be 'double' or 'double-double', got {precision!r}")
     engine = Engine(system, tab, projection, h)
     n = q0.shape[0]
     nsave = steps // save_every + 1
     out_t = t0 + h * save_every * np.arange(nsave)
-    out_q = np.empty((nsave, n, system.d))
+    dd = precision == "double-double"
+    out_q = np.empty((nsave, n, system.d) + ((2,) if dd else ()))
     out_p = np.empty_like(out_q)
     out_l = np.empty_like(out_q)
-    state = engine.state(q0, p0, lam0)
+    if dd:
+        from .ddouble import divide_array
+        from .engine import State, theta_dd
+        if tab.d is not None:
+            raise ValueError(f"{tab.name}: Lobatto tableaus (d) do not run in double-double yet")
+        q2 = np.stack([q0, np.zeros_like(q0)], axis=-1)
+        p2 = theta_dd(system, q2) if p_given is None else np.stack([p0, np.zeros_like(p0)], axis=-1)
+        state = State.double_double(q2, p2, np.stack([lam0, np.zeros_like(lam0)], axis=-1), h, tab.s)
 
-    def record(step):
-        k = step // save_every
-        out_q[k], out_p[k], out_l[k] = state.q, state.p, state.Lam / h
+        def record(step):
+            k = step // save_every
+            out_q[k], out_p[k], out_l[k] = state.q, state.p, divide_array(state.Lam, h)
+    else:
+        state = engine.state(q0, p0, lam0)
+
+        def record(step):
+            k = step // save_every
+            out_q[k], out_p[k], out_l[k] = state.q, state.p, state.Lam / h
 
     record(0)
     march(engine, state, 0, steps, save_every, on_output=record, t0=t0,
           progress=None if progress is None else (lambda step: progress(step, steps)),
           block=int(chunk) if chunk else BLOCK)
     full = (nsave,) + lead + (system.d,)
+    lo = {}
+    if dd:
+        lo = dict(q_lo=out_q[..., 1].reshape(full), p_lo=out_p[..., 1].reshape(full),
+                  lam_lo=out_l[..., 1].reshape(full))
+        out_q, out_p, out_l = out_q[..., 0], out_p[..., 0], out_l[..., 0]
     return Solution(t=out_t, q=out_q.reshape(full), p=out_p.reshape(full), lam=out_l.reshape(full),
                     breakdown_time=state.breakdown_time.reshape(lead).copy(),
                     newton_iterations=state.iterations.reshape(lead).copy(), steps_taken=state.steps.reshape(lead).copy(),
-                    tableau=tab.name, projection=projection, h=h)
+                    tableau=tab.name, projection=projection, h=h, precision=precision, **lo)

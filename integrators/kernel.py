@@ -35,8 +35,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from .simd import _at, anyl, at, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, raw, re, sel, \
-    st, step_measure
+from .simd import _at, anyl, at, elem, elem3, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, \
+    plain, put, put3, raw, re, sel, st, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
 
@@ -759,19 +759,19 @@ def _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP):
     for l in range(W):
         pt = pt0 + (l if l < nl else 0)
         for m in range(d):
-            lset(w, S.q + m, l, q[pt, m])
-            lset(w, S.p + m, l, p[pt, m])
-            lset(w, S.lam + m, l, Lam[pt, m])
-            lset(w, S.qc + m, l, qc[pt, m])
-            lset(w, S.pc + m, l, pc[pt, m])
-            lset(w, S.mu + m, l, mu[pt, m])
+            lset(w, S.q + m, l, elem(q, pt, m))
+            lset(w, S.p + m, l, elem(p, pt, m))
+            lset(w, S.lam + m, l, elem(Lam, pt, m))
+            lset(w, S.qc + m, l, elem(qc, pt, m))
+            lset(w, S.pc + m, l, elem(pc, pt, m))
+            lset(w, S.mu + m, l, elem(mu, pt, m))
         for i in range(s):
             for m in range(d):
-                lset(w, S.Y + i * d + m, l, Y[pt, i, m])
+                lset(w, S.Y + i * d + m, l, elem3(Y, pt, i, m))
         valid = have[pt] != 0 and l < nl          # factors kept from the last step
         for i in range(nz):
             for j in range(nz):
-                lset(w, S.lu + i * nz + j, l, lu[pt, i, j] if valid else 0.0)
+                lset(w, S.lu + i * nz + j, l, sel(valid, elem3(lu, pt, i, j), 0.0))
             # (a lane's solve runs whether or not its factors are used: its pivots must be rows)
             lset(ip, IP.piv + i, l, piv[pt, i] if valid else i)
         lset(f, F.have, l, float(have[pt]))
@@ -788,18 +788,18 @@ def _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP):
     for l in range(nl):
         pt = pt0 + l
         for m in range(d):
-            q[pt, m] = lget(w, S.q + m, l)
-            p[pt, m] = lget(w, S.p + m, l)
-            Lam[pt, m] = lget(w, S.lam + m, l)
-            qc[pt, m] = lget(w, S.qc + m, l)
-            pc[pt, m] = lget(w, S.pc + m, l)
-            mu[pt, m] = lget(w, S.mu + m, l)
+            put(q, pt, m, lget(w, S.q + m, l))
+            put(p, pt, m, lget(w, S.p + m, l))
+            put(Lam, pt, m, lget(w, S.lam + m, l))
+            put(qc, pt, m, lget(w, S.qc + m, l))
+            put(pc, pt, m, lget(w, S.pc + m, l))
+            put(mu, pt, m, lget(w, S.mu + m, l))
         for i in range(s):
             for m in range(d):
-                Y[pt, i, m] = lget(w, S.Y + i * d + m, l)
+                put3(Y, pt, i, m, lget(w, S.Y + i * d + m, l))
         for i in range(nz):
             for j in range(nz):
-                lu[pt, i, j] = lget(w, S.lu + i * nz + j, l)
+                put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, l))
             piv[pt, i] = lget(ip, IP.piv + i, l)
         have[pt] = 1 if lget(f, F.have, l) != 0.0 else 0
         hist[pt] = 1 if lget(f, F.hist, l) != 0.0 else 0
@@ -821,7 +821,7 @@ def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nstep
     S, F, IP = layout(s, d, nz)       # (made here: numba's parallel loop takes no named tuples)
     plan = Plan(*plan)
     W = len(proto)
-    w, f, ip, qr = lanes(WS, 0, proto), lanes(FS, 0, proto), lanes(IS, 0, proto), _at(QR, 0)
+    w, f, ip, qr = lanes(WS, 0, proto), lanes(FS, 0, plain(proto)), lanes(IS, 0, plain(proto)), _at(QR, 0)
     live = st_[8]
     for pt0 in range(lo, hi, W):
         nl = min(W, hi - pt0)
@@ -860,12 +860,23 @@ def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tol
     kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
     nblocks = (n + block - 1) // block
     for bi in prange(nblocks):
-        WS = np.zeros(nw, q.dtype)
+        WS = np.zeros(nw * (q.ndim - 1), q.dtype)     # (a double-double state, (n, d, 2): two doubles a value)
         FS = np.zeros(nf)
         IS = np.zeros(ni, np.int64)
         QR = np.zeros(d)
         _block(WS, FS, IS, QR, bi * block, min(n, (bi + 1) * block), ev, inside, kp, h, tb, plan, t0, first, nsteps,
                st_, d, s, nz, cfg, proto)
+
+
+@njit(**_OPTS)
+def theta_dd_points(ev, k, q2, out, T, TT, dH, HH):
+    """ϑ at each double-double point of q2 (n, d, 2) into out (n, d, 2), by the system's
+    double-double point function (integrators.engine.theta_dd)."""
+    n, d = q2.shape[0], q2.shape[1]
+    P = (0.0,)
+    for i in range(n):
+        ev(lanes(q2, i * d, P), _at(k, 0), False, lanes(out, i * d, P), lanes(T, 0, P), lanes(TT, 0, P),
+           lanes(dH, 0, P), lanes(HH, 0, P))
 
 
 @njit(**_OPTS)

@@ -27,6 +27,12 @@ from numba.core import cgutils
 from numba.extending import models
 from numba.extending import intrinsic, overload, register_model
 
+from .ddouble import DDType, as_dd, dd, dd_t
+
+
+def _is_dd_ptr(p):
+    return isinstance(p, types.CPointer) and isinstance(p.dtype, DDType)
+
 
 class Vec(types.Type):
     """W float64 values, one per lane."""
@@ -117,14 +123,33 @@ def _at(typingctx, base, off):
             return builder.gep(args[0], [args[1]])
         return base(base, off), codegen
 
+def _dd_proto(proto) -> bool:
+    """Whether ``proto`` asks for double-double values: the marker ``(0.0,)`` (W = 1, the value a
+    pair of doubles), where a lane count is ``(0,) * W`` (integers; a nested tuple would not pass
+    numba's parallel loop)."""
+    return isinstance(proto, types.BaseTuple) and len(proto) == 1 and isinstance(proto[0], types.Float)
+
+
 @intrinsic
 def lanes(typingctx, base, off, proto):
     """A lane pointer to element ``off`` of ``base`` (array or pointer), W = len(proto), with
-    offsets counted in logical elements (× W).  W = 1 gives a plain pointer: the scalar path."""
+    offsets counted in logical elements (× W).  W = 1 gives a plain pointer: the scalar path.  With
+    the double-double marker ``(0.0,)`` a float64 array or a double-double pointer gives a
+    pointer to double-doubles (element i at doubles 2i, 2i + 1); other arrays (the pivots) stay plain."""
     W = len(proto) if isinstance(proto, types.BaseTuple) else None
     if W is None:
         return None
     dtype = base.dtype
+    if _dd_proto(proto) and (dtype == types.float64 or isinstance(dtype, DDType)):
+        rt = types.CPointer(dd_t)
+
+        def codegen_dd(context, builder, sig, args):
+            if isinstance(sig.args[0], types.Array):
+                data = context.make_array(sig.args[0])(context, builder, args[0]).data
+                two = builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(2))
+                return builder.bitcast(builder.gep(data, [two]), context.get_value_type(rt))
+            return builder.gep(args[0], [_intp(context, builder, sig.args[1], args[1])])
+        return rt(base, off, proto), codegen_dd
     if W > 1 and dtype not in (types.float64, types.int64):
         return None                             # lanes of doubles (values) and of int64 (pivots) only
     rt = types.CPointer(dtype) if W == 1 else LanePtr(dtype, W)
@@ -189,6 +214,76 @@ def _lp_elem(typingctx, p, i, lane):
     return types.CPointer(p.dtype)(p, i, lane), codegen
 
 
+def plain(proto):
+    """The lane prototype of the real bookkeeping beside ``proto``'s values: ``proto`` itself, or
+    (0,) for the double-double marker (flags stay doubles)."""
+
+
+@overload(plain, inline="never")
+def _plain(proto):
+    if _dd_proto(proto):
+        return lambda proto: (0,)
+    return lambda proto: proto
+
+
+def elem(a, i, j):
+    """a[i, j] of a state array: a number, or a double-double from an array with a last axis of 2."""
+
+
+def elem3(a, i, j, k):
+    """a[i, j, k] of a state array (as :func:`elem`)."""
+
+
+def put(a, i, j, v):
+    """a[i, j] = v of a state array (a double-double array keeps both parts)."""
+
+
+def put3(a, i, j, k, v):
+    """a[i, j, k] = v of a state array (as :func:`put`)."""
+
+
+@overload(elem, inline="never")
+def _elem(a, i, j):
+    if a.ndim == 3:
+        return lambda a, i, j: dd(a[i, j, 0], a[i, j, 1])
+    return lambda a, i, j: a[i, j]
+
+
+@overload(elem3, inline="never")
+def _elem3(a, i, j, k):
+    if a.ndim == 4:
+        return lambda a, i, j, k: dd(a[i, j, k, 0], a[i, j, k, 1])
+    return lambda a, i, j, k: a[i, j, k]
+
+
+@overload(put, inline="never")
+def _put(a, i, j, v):
+    if a.ndim == 3:
+        def impl_dd(a, i, j, v):
+            x = as_dd(v)
+            a[i, j, 0] = x.hi
+            a[i, j, 1] = x.lo
+        return impl_dd
+
+    def impl(a, i, j, v):
+        a[i, j] = v
+    return impl
+
+
+@overload(put3, inline="never")
+def _put3(a, i, j, k, v):
+    if a.ndim == 4:
+        def impl_dd(a, i, j, k, v):
+            x = as_dd(v)
+            a[i, j, k, 0] = x.hi
+            a[i, j, k, 1] = x.lo
+        return impl_dd
+
+    def impl(a, i, j, k, v):
+        a[i, j, k] = v
+    return impl
+
+
 def ld(p, i):
     """Element i (all lanes) of p."""
 
@@ -225,6 +320,14 @@ def _ld(p, i):
 def _st(p, i, v):
     if isinstance(p, LanePtr):
         return lambda p, i, v: _lp_store(p, i, v)
+    if _is_dd_ptr(p):
+        def impl_dd(p, i, v):
+            p[i] = as_dd(v)
+        return impl_dd
+    if isinstance(p, types.CPointer) and isinstance(v, DDType):
+        def impl_round(p, i, v):       # a double-double into real bookkeeping: its double
+            p[i] = v.hi
+        return impl_round
     if isinstance(p, types.CPointer):
         def impl(p, i, v):
             p[i] = v
@@ -245,6 +348,14 @@ def _lset(p, i, lane, v):
         def impl(p, i, lane, v):
             _lp_elem(p, i, lane)[0] = v
         return impl
+    if _is_dd_ptr(p):
+        def impl_dd(p, i, lane, v):
+            p[i] = as_dd(v)
+        return impl_dd
+    if isinstance(p, types.CPointer) and isinstance(v, DDType):
+        def impl_round(p, i, lane, v):
+            p[i] = v.hi
+        return impl_round
     if isinstance(p, types.CPointer):
         def impl(p, i, lane, v):
             p[i] = v
@@ -512,6 +623,8 @@ def _vsel(typingctx, m, a, b):
 def _sel(m, a, b):
     if isinstance(m, Mask) or isinstance(a, Vec) or isinstance(b, Vec):
         return lambda m, a, b: _vsel(m, a, b)
+    if isinstance(m, types.Boolean) and (isinstance(a, DDType) or isinstance(b, DDType)):
+        return lambda m, a, b: as_dd(a) if m else as_dd(b)
     if isinstance(m, types.Boolean):
         return lambda m, a, b: a if m else b
 
@@ -645,6 +758,8 @@ def _raw(p):
 def _re(x):
     if isinstance(x, types.Complex):
         return lambda x: x.real
+    if isinstance(x, DDType):
+        return lambda x: x.hi            # (where a double is wanted: pivot choice, the domain test)
     return lambda x: x
 
 
@@ -656,6 +771,8 @@ def _is_complex(p):
 
 @overload(step_measure, inline="never")
 def _step_measure(r, scale, cs):
+    if isinstance(r, DDType):
+        return lambda r, scale, cs: abs(r.hi) / scale
     if isinstance(r, types.Complex):
         return lambda r, scale, cs: max(abs(r.real) / scale, abs(r.imag) / (cs * scale))
     return lambda r, scale, cs: abs(r) / scale
