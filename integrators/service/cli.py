@@ -90,7 +90,7 @@ def _watchdog(sock, rank, stopped):
                       "user code that does not return?)", file=sys.stderr, flush=True)
             except Exception:
                 pass
-        _abort_other_ranks(code, wait=False)
+        _abort_other_ranks(code)
         os._exit(code)
 
 
@@ -124,7 +124,7 @@ def _rank() -> int:
     return 0
 
 
-def _abort_other_ranks(code, wait=True):
+def _abort_other_ranks(code):
     """Under mpiexec, stop every rank: the others may sit in a collective this rank will never join
     (a signal reaches Python only between bytecodes, not inside a blocking MPI call).  The file was
     closed by the driver before this point (or, from the watchdog, flushed at its last output)."""
