@@ -880,6 +880,16 @@ def theta_dd_points(ev, k, q2, out, T, TT, dH, HH):
 
 
 @njit(**_OPTS)
+def scalars_dd_points(sc, k, q2, out):
+    """H and the momentum at each double-double point of q2 (n, d, 2) into out (n, 2, 2), by the
+    system's double-double ``scalars_dd`` (integrators.engine.scalars_dd)."""
+    n, d = q2.shape[0], q2.shape[1]
+    P = (0.0,)
+    for i in range(n):
+        sc(lanes(q2, i * d, P), _at(k, 0), lanes(out, i * 2, P))
+
+
+@njit(**_OPTS)
 def _probe(WS, zz, r, J, ev, k, tab, plan, h, q, p, lam, jac, s, S):
     d = q.shape[0]
     w = lanes(WS, 0, (0,))
