@@ -4,6 +4,7 @@ extended-precision run.
 
     python scripts/energy_drift.py double [--steps 1000000] [--json docs/figures/energy_drift.json]
     python scripts/energy_drift.py extended GLRK5 [--steps 200000] [--json docs/figures/energy_drift_extended.json]
+    python scripts/energy_drift.py double-double GLRK3 GLRK4 GLRK5 GLRK6 [--steps 1250000] [--json docs/figures/energy_drift_double_double.json]
 
 (R, Z, φ, u) = (2.5, 0, 0, 0.3425), h = 2.5 (app:guiding_centre_dynamics).  The run is split into 10
 intervals of equal length; each interval's value is max |H − H₀|/|H₀| over it (sampled every
@@ -86,14 +87,20 @@ def double(args):
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 
 
-def extended(args):
-    from integrators import reference
+def beside_double(args):
+    """For each tableau of ``args``: (name, tableau, sampling cadence, the --json results so far, the
+    compiled double run of the orbit), the run a reference is compared with."""
     every = max(1, args.steps // 4000)
-    sy = integrators.system("guiding_centre_tokamak")
     out = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
     for name in args.tableaus:
         tab = integrators.tableau(name)
-        qd, wall_d, broke_d = double_run(tab, args.steps, every)
+        yield name, tab, every, out, double_run(tab, args.steps, every)
+
+
+def extended(args):
+    from integrators import reference
+    sy = integrators.system("guiding_centre_tokamak")
+    for name, tab, every, out, (qd, wall_d, broke_d) in beside_double(args):
         q = np.array([Q0], dtype=np.longdouble)
         st = reference.Stepper(sy, tab, "symmetric", H_STEP)
         S = reference.State(q, sy.theta(q), np.zeros_like(q), H_STEP, st.s)
@@ -116,17 +123,57 @@ def extended(args):
         row = dict(tableau=name, steps=args.steps, completed=bool(S.live[0]), every=every,
                    newton_iterations_per_step=round(float(S.iterations[0]) / max(1, int(S.steps[0])), 2),
                    wall_long_double_s=round(wall_x, 1), wall_double_s=round(wall_d, 1))
-        for key, e in (("double", ed), ("long_double", ex), ("round_off_part", part)):
-            row[key], row[key + "_growth"], row[key + "_growth_law"] = intervals(e, every)
         row["position_difference_at_end"] = float(f"{np.max(np.abs(qd[len(qx) - 1] - qx[-1].astype(float))):.3g}")
-        out[name] = row
-        for key in ("double", "long_double", "round_off_part"):
-            print(f"| {name} | {key} | {', '.join(f'{m:.1e}' for m in row[key])} | {row[key + '_growth_law']}, "
-                  f"α = {row[key + '_growth']:+.2f} |")
-        if args.json:     # re-read: another process may have added its tableau meanwhile
-            merged = json.loads(Path(args.json).read_text()) if Path(args.json).exists() else {}
-            merged[name] = row
-            Path(args.json).write_text(json.dumps(merged, indent=1) + "\n")
+        record(args, out, name, row, every, (("double", ed), ("long_double", ex), ("round_off_part", part)))
+
+
+def record(args, out, name, row, every, series):
+    """The row's interval maxima and growth of each (key, series), printed, and merged into --json."""
+    for key, e in series:
+        row[key], row[key + "_growth"], row[key + "_growth_law"] = intervals(e, every)
+        print(f"| {name} | {key} | {', '.join(f'{m:.1e}' for m in row[key])} | {row[key + '_growth_law']}, "
+              f"α = {row[key + '_growth']:+.2f} |", flush=True)
+    out[name] = row
+    if args.json:     # re-read: another process may have added its tableau meanwhile
+        merged = json.loads(Path(args.json).read_text()) if Path(args.json).exists() else {}
+        merged[name] = row
+        Path(args.json).write_text(json.dumps(merged, indent=1) + "\n")
+
+
+def dd_energy(q2):
+    """H in double-double at the points q2 (n, d, 2): (n, 2) pairs (hi, lo)."""
+    from integrators.engine import scalars_dd
+    return scalars_dd(integrators.system("guiding_centre_tokamak"), q2)[:, 0]
+
+
+def dd_difference(a, b, scale):
+    """|a − b|/|scale| of double-double arrays (n, 2): hi − hi (exact where they are close) plus lo − lo."""
+    return np.abs((a[:, 0] - b[:, 0]) + (a[:, 1] - b[:, 1])) / abs(scale)
+
+
+def double_double(args):
+    """The orbit in double-double (the compiled kernel's third specialisation, ~32 digits) beside
+    the compiled double run of the same steps; both energies evaluated in double-double.  'round-off
+    part': |H(q_double) − H(q_dd)|/|H₀|, the double run's energy error less the reference's."""
+    sy = integrators.system("guiding_centre_tokamak")
+    for name, tab, every, out, (qd, wall_d, broke_d) in beside_double(args):
+        t0 = time.perf_counter()
+        sol = integrate(sy, np.array(Q0), tab, "symmetric", H_STEP, steps=args.steps, save_every=every,
+                        precision="double-double")
+        wall_x = time.perf_counter() - t0
+        q2 = np.stack([sol.q[:, 0], sol.q_lo[:, 0]], axis=-1)
+        Hx = dd_energy(q2)
+        Hd = dd_energy(np.stack([qd, np.zeros_like(qd)], axis=-1))
+        H0 = Hx[0, 0]
+        ex, ed, part = dd_difference(Hx, Hx[:1], H0), dd_difference(Hd, Hx[:1], H0), dd_difference(Hd, Hx, H0)
+        row = dict(tableau=name, steps=args.steps, completed=not bool(np.isfinite(sol.breakdown_time[0])),
+                   double_completed=not broke_d, every=every,
+                   newton_iterations_per_step=round(float(sol.newton_iterations[0]) / max(1, int(sol.steps_taken[0])), 2),
+                   wall_double_double_s=round(wall_x, 1), wall_double_s=round(wall_d, 1))
+        row["position_difference_at_end"] = float(f"{np.max(np.abs(qd[-1] - (sol.q[-1, 0] + sol.q_lo[-1, 0]))):.3g}")
+        record(args, out, name, row, every, (("double", ed), ("double_double", ex), ("round_off_part", part)))
+        print(f"  {name}: double-double {wall_x:.0f} s, double {wall_d:.0f} s, "
+              f"{row['newton_iterations_per_step']} Newton iterations a step", flush=True)
 
 
 def main():
@@ -140,8 +187,12 @@ def main():
     x.add_argument("tableaus", nargs="+")
     x.add_argument("--steps", type=int, default=200_000)
     x.add_argument("--json")
+    dd = sub.add_parser("double-double", help="a double-double run beside the double one")
+    dd.add_argument("tableaus", nargs="+")
+    dd.add_argument("--steps", type=int, default=1_250_000)
+    dd.add_argument("--json")
     args = ap.parse_args()
-    {"double": double, "extended": extended}[args.cmd](args)
+    {"double": double, "extended": extended, "double-double": double_double}[args.cmd](args)
 
 
 if __name__ == "__main__":
