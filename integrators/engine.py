@@ -555,9 +555,6 @@ class Engine:
         real states of at least LANES points).  Any choice gives the same bits."""
         from . import kernel
         if state.q.ndim == 3:                       # a double-double state: the kernel's third specialisation
-            if self.tableau.d is not None:
-                raise ValueError(f"{self.tableau.name}: Lobatto tableaus (d) do not run in double-double yet "
-                                 "(the constraint weights d are held in double only)")
             if "dd" not in self._functions:
                 self._functions["dd"] = point_functions(self.system, precision="double-double")
             ev, inside = self._functions["dd"]

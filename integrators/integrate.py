@@ -90,8 +90,7 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
         (about 32 digits; integrators/ddouble.py), one point at a time, Newton to a few
         double-double ulps; q0, p0, lam0 are taken exactly as doubles, p0 defaults to ϑ(q0) in
         double-double, and every state comes back as two arrays whose exact sum is the result
-        (``q`` and ``q_lo``, ``p`` and ``p_lo``, ``lam`` and ``lam_lo``).  Lobatto tableaus do not
-        run in double-double yet.
+        (``q`` and ``q_lo``, ``p`` and ``p_lo``, ``lam`` and ``lam_lo``).
 
     Returns
     -------
@@ -133,8 +132,6 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     if dd:
         from .ddouble import divide_array
         from .engine import State, theta_dd
-        if tab.d is not None:
-            raise ValueError(f"{tab.name}: Lobatto tableaus (d) do not run in double-double yet")
         q2 = np.stack([q0, np.zeros_like(q0)], axis=-1)
         p2 = theta_dd(system, q2) if p_given is None else np.stack([p0, np.zeros_like(p0)], axis=-1)
         state = State.double_double(q2, p2, np.stack([lam0, np.zeros_like(lam0)], axis=-1), h, tab.s)

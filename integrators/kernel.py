@@ -34,6 +34,9 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
+from numba.extending import overload
+
+from .ddouble import DDType, dd
 
 from .simd import _at, anyl, at, elem, elem3, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, \
     plain, put, put3, raw, re, sel, st, step_measure
@@ -73,16 +76,25 @@ tableau has the Lobatto constraint μ (eq:vprk_lobatto)."""
 
 # -- the tableau's flat layout, made and read here only ----------------------------------------
 
-Coefficients = namedtuple("Coefficients", "a a_lo abar abar_lo b b_lo d E")
+Coefficients = namedtuple("Coefficients", "a a_lo abar abar_lo b b_lo d d_lo E")
 
 
 def flat_tableau(tableau, E):
-    """[a, a_lo, ā, ā_lo, b, b_lo, d, E] as one float64 array (double + correction coefficients, the
-    Lobatto constraint vector d, zero when unused, and the stage guess E, s × (s + 1): the next
-    stages from the last step's s stage values and h·q̇(q_n), :func:`integrators.engine.predictor`)."""
+    """[a, a_lo, ā, ā_lo, b, b_lo, d, d_lo, E] as one float64 array (double + correction coefficients,
+    the Lobatto constraint vector d with its correction, zero when unused, and the stage guess E,
+    s × (s + 1): the next stages from the last step's s stage values and h·q̇(q_n),
+    :func:`integrators.engine.predictor`).  The double kernel reads d alone (as it always has); the
+    double-double kernel d + d_lo (:func:`_lobatto`)."""
     s = tableau.s
-    parts = (tableau.a, tableau.a_lo, tableau.abar, tableau.abar_lo, tableau.b, tableau.b_lo,
-             tableau.d if tableau.d is not None else np.zeros(s), E)
+    d, d_lo = np.zeros(s), np.zeros(s)
+    if tableau.d is not None:
+        d = np.asarray(tableau.d, dtype=np.float64)
+        exact = tableau.exact.get("d") if tableau.exact else None
+        if exact is not None:
+            import mpmath
+            with mpmath.workdps(60):
+                d_lo = np.array([float(mpmath.mpf(x) - mpmath.mpf(float(hi))) for x, hi in zip(exact, d)])
+    parts = (tableau.a, tableau.a_lo, tableau.abar, tableau.abar_lo, tableau.b, tableau.b_lo, d, d_lo, E)
     return np.concatenate([np.asarray(x, dtype=np.float64).ravel() for x in parts])
 
 
@@ -90,7 +102,30 @@ def flat_tableau(tableau, E):
 def _coefficients(tb, s):
     ss = s * s
     return Coefficients(_at(tb, 0), _at(tb, ss), _at(tb, 2 * ss), _at(tb, 3 * ss), _at(tb, 4 * ss),
-                        _at(tb, 4 * ss + s), _at(tb, 4 * ss + 2 * s), _at(tb, 4 * ss + 3 * s))
+                        _at(tb, 4 * ss + s), _at(tb, 4 * ss + 2 * s), _at(tb, 4 * ss + 3 * s), _at(tb, 4 * ss + 4 * s))
+
+
+def lobatto_d(c, i, like):
+    """The Lobatto weight d_i (eq:vprk_lobatto) in the precision of ``like``: the double d_i, or for
+    a double-double ``like`` the double-double d_i + d_lo_i."""
+
+
+def lobatto_ratio(c, i, like):
+    """d_i / b_i in the precision of ``like`` (double: d_i / b_i of the doubles, as always)."""
+
+
+@overload(lobatto_d, inline="always")
+def _lobatto_d(c, i, like):
+    if isinstance(like, DDType):
+        return lambda c, i, like: dd(c.d[i], c.d_lo[i])
+    return lambda c, i, like: c.d[i]
+
+
+@overload(lobatto_ratio, inline="always")
+def _lobatto_ratio(c, i, like):
+    if isinstance(like, DDType):
+        return lambda c, i, like: dd(c.d[i], c.d_lo[i]) / dd(c.b[i], c.b_lo[i])
+    return lambda c, i, like: c.d[i] / c.b[i]
 
 
 # -- the scratch: named offsets into one buffer per group of W points ---------------------------
@@ -317,7 +352,7 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
                 cor = cor + c.abar_lo[i * s + j] * ld(G, j * d + m)
             rr = ld(th, i * d + m) - ld(pb, m) - (acc + cor)
             if plan.lobatto:
-                rr = rr + ld(z, iM + m) * (c.d[i] / c.b[i])
+                rr = rr + ld(z, iM + m) * lobatto_ratio(c, i, rr)
             st(r, i * d + m, rr)
     if coupled:
         for m in range(d):
@@ -330,9 +365,10 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             st(r, iL + m, ld(p1, m) - ld(pth, END * d + m))
     if plan.lobatto:
         for m in range(d):
-            acc = c.d[0] * ld(z, m)
+            z0 = ld(z, m)
+            acc = lobatto_d(c, 0, z0) * z0
             for i in range(1, s):
-                acc = acc + c.d[i] * ld(z, i * d + m)
+                acc = acc + lobatto_d(c, i, z0) * ld(z, i * d + m)
             st(r, iM + m, acc)
     return px
 
@@ -906,7 +942,7 @@ def probe(ev, k, tab, plan, h, q, p, lam, z, jac):
     Newton solves, for tests (the Jacobian against complex-step differences of the residual)."""
     d = q.shape[0]
     nz = z.shape[0]
-    s = next(c for c in range(1, 9) if 5 * c * c + 4 * c == tab.shape[0])   # the flat tableau: 5 s² + 4 s
+    s = next(c for c in range(1, 9) if 5 * c * c + 5 * c == tab.shape[0])   # the flat tableau: 5 s² + 5 s
     S, F, _ = layout(s, d, nz)
     WS = np.zeros(S.size, z.dtype)
     r = np.zeros(nz, z.dtype)

@@ -25,6 +25,7 @@ class Oracle:
         self.a = [[mpmath.mpf(ex["a"][i, j]) for j in range(self.s)] for i in range(self.s)]
         self.abar = [[mpmath.mpf(ex["abar"][i, j]) for j in range(self.s)] for i in range(self.s)]
         self.b = [mpmath.mpf(x) for x in ex["b"]]
+        self.dvec = None if ex.get("d") is None else [mpmath.mpf(x) for x in ex["d"]]   # Lobatto (eq:vprk_lobatto)
         self.h = mpmath.mpf(h)
         q = list(system.q)
         subs = {k: sympy.Float(v, 60) if not isinstance(v, int) else v for k, v in system.params.items()}
@@ -71,6 +72,9 @@ class Oracle:
             pbar = [pbar[m] + tl[m] for m in range(d)]
         coupled = pre == "unknown"
 
+        lob = self.dvec is not None
+        iM = s * d + (d if coupled else 0)
+
         def parts(z):
             Y = [z[i * d:(i + 1) * d] for i in range(s)]
             L = z[s * d:s * d + d] if coupled else [mpmath.mpf(0)] * d
@@ -97,20 +101,27 @@ class Oracle:
                 tl = self.tapply(Tp, L)
                 pb = [pbar[m] + tl[m] for m in range(d)]
             r = []
+            mu = list(z[iM:iM + d]) if lob else None
             for i in range(s):
                 thQ = self.th(Q[i])
                 for m in range(d):
-                    r.append(thQ[m] - pb[m] - mpmath.fsum(self.abar[i][j] * G[j][m] for j in range(s)))
+                    rr = thQ[m] - pb[m] - mpmath.fsum(self.abar[i][j] * G[j][m] for j in range(s))
+                    if lob:
+                        rr += mu[m] * self.dvec[i] / self.b[i]
+                    r.append(rr)
             if coupled:
                 q1 = [q0[m] + sY[m] + sig * L[m] for m in range(d)]
                 Tpost = self.T(q1) if rec.post_at == "end" else Tp
                 tl = self.tapply(Tpost, L)
                 th1 = self.th(q1)
                 r += [pb[m] + sG[m] + sig * tl[m] - th1[m] for m in range(d)]
+            if lob:
+                r += [mpmath.fsum(self.dvec[i] * Y[i][m] for i in range(s)) for m in range(d)]
             return r
 
         v = self.velocity(q)
-        z0 = [h * v[m] for _ in range(s) for m in range(d)] + (list(lam) if coupled else [])
+        z0 = [h * v[m] for _ in range(s) for m in range(d)] + (list(lam) if coupled else []) + \
+            ([mpmath.mpf(0)] * d if lob else [])
         z = mpmath.findroot(residual, z0, tol=mpmath.mpf(10) ** (-2 * self.dps + 10), maxsteps=100)
         z = [z[i] for i in range(len(z0))]
         Y, L, q0, Q, G, sY, sG = parts(z)

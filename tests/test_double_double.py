@@ -1,12 +1,12 @@
 """The double-double engine: the compiled kernel's third specialisation (the same source on
 integrators/ddouble.py numbers, one point at a time).
 
-* one step of every admissible non-Lobatto pair on two systems (Lotka–Volterra: log; the massless
+* one step of every admissible pair (Lobatto IIIA/IIIB with their constraint weights d too) on two systems (Lotka–Volterra: log; the massless
   charged particle: sin, cos) agrees with a 50-digit mpmath computation of the same equations
   (tests/mp_oracle.py) to 1e-28;
 * a point's bits do not depend on its block or the thread count;
 * below double's floor: GLRK3-standard's order 6 shows on errors under 1e-17;
-* ``integrate(..., precision="double-double")`` returns the low parts; Lobatto tableaus are refused.
+* ``integrate(..., precision="double-double")`` returns the low parts.
 """
 import mpmath
 import numpy as np
@@ -19,7 +19,8 @@ from integrators.projections import PROJECTIONS, admission
 from mp_oracle import Oracle
 
 SYSTEMS = {"lotka_volterra_2d": ([1.2, 0.9], 0.1), "massless_charged_particle": ([0.3, 0.2], 0.2)}
-TABLEAUS = ("GLRK1", "GLRK2", "GLRK3", "GLRK4", "SRK3", "RadIIA2", "RadIIA3")
+TABLEAUS = ("GLRK1", "GLRK2", "GLRK3", "GLRK4", "SRK3", "RadIIA2", "RadIIA3", "LobIIIA2", "LobIIIA3", "LobIIIA4",
+            "LobIIIB2", "LobIIIB3", "LobIIIB4", "LobIIIC3", "LobIIID3", "LobIIIE3")
 
 
 @pytest.mark.parametrize("sysname", sorted(SYSTEMS))
@@ -93,7 +94,7 @@ def test_order_six_below_double_round_off():
     assert errs[-1] < 1e-17, errs
 
 
-def test_integrate_returns_the_low_parts_and_refuses_lobatto():
+def test_integrate_returns_the_low_parts():
     sy = integrators.system("lotka_volterra_2d")
     sol = integrators.integrate(sy, [[1.2, 0.9], [1.0, 1.1]], "GLRK2", "symmetric", h=0.1, steps=10, save_every=5,
                                 precision="double-double")
@@ -102,8 +103,6 @@ def test_integrate_returns_the_low_parts_and_refuses_lobatto():
     double = integrators.integrate(sy, [[1.2, 0.9], [1.0, 1.1]], "GLRK2", "symmetric", h=0.1, steps=10, save_every=5)
     assert double.q_lo is None and np.max(np.abs(double.q - sol.q)) < 1e-13
     assert np.array_equal(sol.q[0], [[1.2, 0.9], [1.0, 1.1]]) and not sol.q_lo[0].any()
-    with pytest.raises(ValueError, match="Lobatto"):
-        integrators.integrate(sy, [[1.2, 0.9]], "LobIIIA3", "none", h=0.1, steps=2, precision="double-double")
     with pytest.raises(ValueError, match="precision"):
         integrators.integrate(sy, [[1.2, 0.9]], "GLRK2", "none", h=0.1, steps=2, precision="quad")
 
