@@ -317,14 +317,13 @@ def dd_log(a):
 # -- trigonometric ------------------------------------------------------------------------------------
 
 @njit(**_OPTS)
-def _sin_taylor(r):
-    """sin r for |r| ≤ π/4."""
-    if r.hi == 0.0:
-        return r
-    r2 = dd_neg(dd_sqr(r))
-    s, t = r, r
-    for k in range(3, 40, 2):
-        t = dd_mul(t, r2)
+def _taylor(t, x2, k0):
+    """The series of sin, cos and sinh: its first term t (x, or 1), each next term the last times
+    x2 (±x²) with 1/k! for k = k0, k0 + 2, … (the factorials of the odd or even powers), summed until
+    a term is below 1e-34 of the sum."""
+    s = t
+    for k in range(k0, 40, 2):
+        t = dd_mul(t, x2)
         term = dd_mul(t, _inv_fact(k))
         s = dd_add(s, term)
         if abs(term.hi) <= 1e-34 * abs(s.hi):
@@ -333,17 +332,15 @@ def _sin_taylor(r):
 
 
 @njit(**_OPTS)
+def _sin_taylor(r):
+    """sin r for |r| ≤ π/4."""
+    return r if r.hi == 0.0 else _taylor(r, dd_neg(dd_sqr(r)), 3)
+
+
+@njit(**_OPTS)
 def _cos_taylor(r):
     """cos r for |r| ≤ π/4."""
-    r2 = dd_neg(dd_sqr(r))
-    s, t = dd(1.0, 0.0), dd(1.0, 0.0)
-    for k in range(2, 40, 2):
-        t = dd_mul(t, r2)
-        term = dd_mul(t, _inv_fact(k))
-        s = dd_add(s, term)
-        if abs(term.hi) <= 1e-34:
-            break
-    return s
+    return _taylor(dd(1.0, 0.0), dd_neg(dd_sqr(r)), 2)
 
 
 @njit(**_OPTS)
@@ -444,15 +441,7 @@ def dd_acos(a):
 @njit(**_OPTS)
 def _sinh_taylor(a):
     """sinh a for |a| ≤ 0.05."""
-    a2 = dd_sqr(a)
-    s, t = a, a
-    for k in range(3, 40, 2):
-        t = dd_mul(t, a2)
-        term = dd_mul(t, _inv_fact(k))
-        s = dd_add(s, term)
-        if abs(term.hi) <= 1e-34 * abs(s.hi):
-            break
-    return s
+    return _taylor(a, dd_sqr(a), 3)
 
 
 @njit(**_OPTS)
@@ -658,6 +647,17 @@ def _isfinite(a):
 def _sign(a):
     if _is_dd(a):
         return lambda a: dd(np.sign(a.hi) if a.hi != 0.0 else np.sign(a.lo), 0.0)
+
+
+@njit(**_OPTS)
+def scale_array(x, h):
+    """h × x for a double-double array x (…, 2) and a double h, each value to a double-double."""
+    out = np.empty_like(x)
+    flat, res = x.reshape(-1, 2), out.reshape(-1, 2)
+    for i in range(flat.shape[0]):
+        r = dd_mul_d(dd(flat[i, 0], flat[i, 1]), h)
+        res[i, 0], res[i, 1] = r.hi, r.lo
+    return out
 
 
 @njit(**_OPTS)

@@ -409,7 +409,8 @@ class State:
         q2, p2, l2 = pairs(q), pairs(p), pairs(lam)
         st = cls(q2[..., 0], p2[..., 0], np.zeros(q2.shape[:2]), h, s)
         st.q, st.p = q2.copy(), p2.copy()
-        st.Lam = np.ascontiguousarray(_dd_times(l2, float(h)))
+        from .ddouble import scale_array
+        st.Lam = scale_array(np.ascontiguousarray(l2), float(h))
         for name in ("q_comp", "p_comp", "mu"):
             setattr(st, name, np.zeros_like(q2))
         st.Y = np.zeros(st.Y.shape + (2,))
@@ -495,17 +496,6 @@ def scalars_dd(system, q2):
     k = np.array([float(v) for v in system.params.values()] or [0.0], dtype=np.float64)
     from .kernel import scalars_dd_points
     scalars_dd_points(_load(system, "double-double").scalars_dd, k, q2, out)
-    return out
-
-
-def _dd_times(x, h):
-    """h × x for a double-double array x (…, 2), exactly rounded to double-double."""
-    from .ddouble import split, value
-    if h == 1.0 or not np.any(x):
-        return x.copy() if h == 1.0 else np.zeros_like(x)
-    out = np.empty_like(x)
-    for idx in np.ndindex(x.shape[:-1]):
-        out[idx] = split(value(*x[idx]) * h)
     return out
 
 
