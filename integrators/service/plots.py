@@ -107,6 +107,16 @@ def _caption(under, broke):
     return "".join(f"\n({p})" for p in parts)
 
 
+def _absolute_energy(run) -> bool:
+    """Whether the file records some points' energy error as absolute (H0 = 0: its root attribute)."""
+    import h5py
+    try:
+        with h5py.File(run.path, "r") as f:
+            return int(f.attrs.get("energy_absolute_points", 0)) > 0
+    except (OSError, ValueError):
+        return False
+
+
 def _diagnostics(run, out):
     diags = [d for d in ("energy", "momentum", "constraint") if any(d in pr.errors for pr in run.pairs.values())]
     if not diags:
@@ -118,7 +128,8 @@ def _diagnostics(run, out):
                 law = pr.growth.get(d, ("",))[0]
                 ax.semilogy(pr.t, np.maximum(pr.errors[d], FLOOR), lw=0.8, label=f"{name}: {law}" if law else name,
                             ls=("-", "--", ":", "-.")[k // 10 % 4])
-        ax.set_title(f"{d} error" + (" (relative; absolute where H0 = 0)" if d == "energy" else ""), fontsize=10)
+        ax.set_title(f"{d} error" + ((" (relative; absolute at the points where H0 = 0)" if _absolute_energy(run)
+                                      else " (relative)") if d == "energy" else ""), fontsize=10)
         ax.set_xlabel("t")
         ax.grid(True, lw=0.3)
     for ax in axes[0]:                      # each panel's own legend: the pairs with that error's growth law
