@@ -62,11 +62,18 @@ make_attribute_wrapper(DDType, "hi", "hi")
 make_attribute_wrapper(DDType, "lo", "lo")
 
 
+# Vector forms (integrators/simd.py registers them: W double-doubles in two <W x double>, hi and
+# lo): ``dd`` and ``fma`` given vectors build and fuse them lane by lane, so every algorithm below,
+# written with + − × and these two, runs unchanged on W double-doubles with each lane's bits those
+# of the scalar code.
+VECTOR_FORMS = {}
+
+
 @intrinsic
 def dd(typingctx, hi, lo):
     """The double-double hi + lo (the caller keeps |lo| ≤ ½ ulp(hi), or normalises with dd_add)."""
     if not (isinstance(hi, (types.Float, types.Integer)) and isinstance(lo, (types.Float, types.Integer))):
-        return None
+        return VECTOR_FORMS["dd"](hi, lo) if "dd" in VECTOR_FORMS else None
 
     def codegen(context, builder, sig, args):
         v = cgutils.create_struct_proxy(dd_t)(context, builder)
@@ -80,7 +87,7 @@ def dd(typingctx, hi, lo):
 def fma(typingctx, a, b, c):
     """a × b + c rounded once (LLVM's llvm.fma.f64: exact by definition on every CPU)."""
     if not all(isinstance(x, types.Float) for x in (a, b, c)):
-        return None
+        return VECTOR_FORMS["fma"](a, b, c) if "fma" in VECTOR_FORMS else None
 
     def codegen(context, builder, sig, args):
         fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.DoubleType(), [ir.DoubleType()] * 3),

@@ -37,7 +37,7 @@ import numpy as np
 from .projections import admission, projection_record
 
 CODEGEN_VERSION = "4"          # bump when the generated source changes shape
-DD_CODEGEN_VERSION = "2"       # ... and this when the double-double source does
+DD_CODEGEN_VERSION = "3"       # ... and this when the double-double source does
 BLOCK = 64                     # points per block of the kernel's thread loop (any value gives the same bits)
 
 CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
@@ -240,8 +240,10 @@ def _generate_source(system) -> str:
 def generate_dd_source(system) -> str:
     """The Python source of a system's double-double point function ``evaluate_dd`` (the
     signature of ``evaluate_real`` on pointers to double-doubles; integrators/ddouble.py), its
-    constants exact to a double-double (:class:`_DDPrinter`).  A module of its own, made only when a
-    double-double run asks for it."""
+    constants exact to a double-double (:class:`_DDPrinter`), and ``lanes_dd()``, which compiles the
+    same body on W lanes of double-doubles.  A module of its own, made only when a double-double run
+    asks for it."""
+    from .kernel import LANES
     d = system.d
     q, params = system.q, list(system.params)
     first, second = _point_body(system, _DDPrinter)
@@ -266,6 +268,15 @@ def generate_dd_source(system) -> str:
              *[f"    _q{i} = ld(_qin, {i})" for i in range(d)], *kdd,
              *sbody, "",
              "scalars_dd = cfunc(types.void(_A, _F, _A), cache=True, error_model='numpy')(_scalars_dd)", ""]
+    # the same body on W = kernel.LANES double-doubles (integrators/simd.py's DDVec), made when a
+    # double-double run of at least W points asks for it (lanes_dd)
+    lines += ["", "def lanes_dd():", "    \"\"\"The W-lane double-double point function (compiled on first call).\"\"\"",
+              f"    _P = {(0.0,) * LANES!r}", "",
+              "    def _evaluate_dd_lanes(_qin, _k, _need, _th, _T, _TT, _dH, _HH):",
+              *["    " + x for x in head], *["    " + x for x in first], "        if _need:",
+              *["    " + x for x in second], "            pass", "",
+              "    return cfunc(types.void(_F, _F, types.boolean, _F, _F, _F, _F, _F), cache=True, "
+              "error_model='numpy')(_evaluate_dd_lanes)", ""]
     return "\n".join(lines)
 
 
@@ -336,7 +347,15 @@ def point_functions(system, complex_step=False, lanes=False, precision="double")
     system has a function without a lane form); with ``precision="double-double"`` the scalar
     double-double one (its own module, :func:`generate_dd_source`)."""
     if precision == "double-double":
-        return _load(system, "double-double").evaluate_dd, _load(system).inside
+        mod = _load(system, "double-double")
+        if not lanes:
+            return mod.evaluate_dd, _load(system).inside
+        if not hasattr(mod, "_lanes_dd"):
+            try:
+                mod._lanes_dd = mod.lanes_dd()
+            except Exception:       # a function without a lane form: the engine runs W = 1
+                mod._lanes_dd = None
+        return mod._lanes_dd, _load(system).inside
     mod = _load(system)
     ev = mod.evaluate_lanes if lanes else (mod.evaluate_complex if complex_step else mod.evaluate_real)
     return ev, mod.inside
@@ -379,17 +398,29 @@ class State:
     @classmethod
     def from_checkpoint(cls, fields, h):
         """A state from the :data:`CHECKPOINT_FIELDS` of a checkpoint (arrays copied)."""
-        st = cls(fields["q"], fields["p"], np.zeros_like(fields["q"]), h, fields["Y"].shape[1])
+        q = np.asarray(fields["q"])
+        q1 = q[..., 0] if q.ndim == 3 else q          # (a double-double checkpoint: (n, d, 2) value arrays)
+        st = cls(q1, q1, np.zeros_like(q1), h, fields["Y"].shape[1])
         for name in CHECKPOINT_FIELDS:
             setattr(st, name, np.ascontiguousarray(fields[name]).copy())
         return st
 
     @classmethod
-    def schema(cls, n, d, s) -> dict:
+    def schema(cls, n, d, s, precision="double") -> dict:
         """{field: (shape, dtype)} of the checkpoint of n points (what the HDF5 file preallocates),
-        read off a one-point state so the fields and their types are defined only here."""
-        one = cls(np.zeros((1, d)), np.zeros((1, d)), np.zeros((1, d)), 1.0, s)
+        read off a one-point state so the fields and their types are defined only here (a
+        double-double state's value arrays have a last axis of 2: hi, lo)."""
+        z = np.zeros((1, d))
+        one = cls.double_double(z, z, z, 1.0, s) if precision == "double-double" else cls(z, z, z, 1.0, s)
         return {name: ((n,) + getattr(one, name).shape[1:], getattr(one, name).dtype) for name in CHECKPOINT_FIELDS}
+
+    def nearest(self):
+        """(q, p, Λ = hλ) as doubles: the arrays themselves, or a double-double state's high parts
+        (each the double nearest its value: the kernel keeps |lo| ≤ ½ ulp(hi)).  What the invariants
+        and the stored points are computed from."""
+        if self.q.ndim == 3:
+            return self.q[..., 0], self.p[..., 0], self.Lam[..., 0]
+        return self.q, self.p, self.Lam
 
     def checkpoint(self) -> dict:
         return {name: getattr(self, name) for name in CHECKPOINT_FIELDS}
@@ -506,7 +537,10 @@ class Engine:
     ``tolerances`` (a :class:`Tolerances`) sets Newton's stopping rule.
     """
 
-    def __init__(self, system, tableau, projection, h, tolerances=None):
+    def __init__(self, system, tableau, projection, h, tolerances=None, precision="double"):
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {', '.join(map(repr, PRECISIONS))}, got {precision!r}")
+        self.precision = precision
         why = admission(tableau, projection)
         if why:
             raise ValueError(why)
@@ -533,6 +567,15 @@ class Engine:
         self._functions = {}
 
     def state(self, q, p=None, lam=None, dtype=np.float64):
+        """The state of points q (n, d) with p = ϑ(q) unless given and λ = 0 unless given; in the
+        engine's precision (double-double: q, p, λ may be (n, d, 2) pairs or doubles, taken exactly,
+        and ϑ(q) is evaluated in double-double)."""
+        if self.precision == "double-double":
+            q = np.asarray(q, dtype=np.float64)
+            q2 = np.ascontiguousarray(np.stack([q, np.zeros_like(q)], axis=-1) if q.ndim == 2 else q)
+            p = theta_dd(self.system, q2) if p is None else p
+            lam = np.zeros(q2.shape[:2]) if lam is None else lam
+            return State.double_double(q2, p, lam, self.h, self.tableau.s)
         q = np.asarray(q)
         p = self.system.theta(q) if p is None else p
         lam = np.zeros_like(q) if lam is None else lam
@@ -544,18 +587,23 @@ class Engine:
         ``lanes``: W, points advanced together in SIMD lanes (1 or kernel.LANES; None: LANES for
         real states of at least LANES points).  Any choice gives the same bits."""
         from . import kernel
-        if state.q.ndim == 3:                       # a double-double state: the kernel's third specialisation
-            if "dd" not in self._functions:
-                self._functions["dd"] = point_functions(self.system, precision="double-double")
-            ev, inside = self._functions["dd"]
-            kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
-                           int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
-                           (0.0,))
-            return
-        cplx = bool(np.iscomplexobj(state.q))
         W = lanes if lanes is not None else (kernel.LANES if state.q.shape[0] >= kernel.LANES else 1)
         if W not in (1, kernel.LANES):
             raise ValueError(f"lanes must be 1 or {kernel.LANES}, got {lanes!r}")
+        if state.q.ndim == 3:                       # a double-double state: the kernel's third specialisation
+            key = ("dd", W)
+            if key not in self._functions:
+                ev, inside = point_functions(self.system, lanes=W > 1, precision="double-double")
+                if ev is None:
+                    ev, inside = point_functions(self.system, precision="double-double")
+                    W = 1
+                self._functions[key] = ev, inside, W
+            ev, inside, W = self._functions[key]
+            kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
+                           int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
+                           (0.0,) * W)
+            return
+        cplx = bool(np.iscomplexobj(state.q))
         if cplx:
             W = 1
         key = (cplx, W)
@@ -616,6 +664,7 @@ class MapEngine:
 
 
 PREDICTORS = ("extrapolate", "velocity")
+PRECISIONS = ("double", "double-double")
 
 
 def predictor(c, kind="extrapolate"):

@@ -38,7 +38,7 @@ from numba.extending import overload
 
 from .ddouble import DDType, dd
 
-from .simd import _at, anyl, at, elem, elem3, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, \
+from .simd import DDVec, _at, anyl, at, elem, elem3, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, \
     plain, put, put3, raw, re, sel, st, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
@@ -116,14 +116,14 @@ def lobatto_ratio(c, i, like):
 
 @overload(lobatto_d, inline="always")
 def _lobatto_d(c, i, like):
-    if isinstance(like, DDType):
+    if isinstance(like, (DDType, DDVec)):
         return lambda c, i, like: dd(c.d[i], c.d_lo[i])
     return lambda c, i, like: c.d[i]
 
 
 @overload(lobatto_ratio, inline="always")
 def _lobatto_ratio(c, i, like):
-    if isinstance(like, DDType):
+    if isinstance(like, (DDType, DDVec)):
         return lambda c, i, like: dd(c.d[i], c.d_lo[i]) / dd(c.b[i], c.b_lo[i])
     return lambda c, i, like: c.d[i] / c.b[i]
 

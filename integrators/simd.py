@@ -22,11 +22,12 @@ import operator
 
 import numpy as np
 from llvmlite import ir
-from numba import types
+from numba import njit, types
 from numba.core import cgutils
 from numba.extending import models
-from numba.extending import intrinsic, overload, register_model
+from numba.extending import intrinsic, make_attribute_wrapper, overload, register_model
 
+from . import ddouble as _ddmod
 from .ddouble import DDType, as_dd, dd, dd_t
 
 
@@ -124,10 +125,11 @@ def _at(typingctx, base, off):
         return base(base, off), codegen
 
 def _dd_proto(proto) -> bool:
-    """Whether ``proto`` asks for double-double values: the marker ``(0.0,)`` (W = 1, the value a
-    pair of doubles), where a lane count is ``(0,) * W`` (integers; a nested tuple would not pass
-    numba's parallel loop)."""
-    return isinstance(proto, types.BaseTuple) and len(proto) == 1 and isinstance(proto[0], types.Float)
+    """Whether ``proto`` asks for double-double values: the marker ``(0.0,) * W`` (floats; W = 1 the
+    scalar double-double path, W > 1 double-double lanes), where a lane count of doubles is
+    ``(0,) * W`` (integers; a nested tuple would not pass numba's parallel loop)."""
+    return isinstance(proto, types.BaseTuple) and len(proto) >= 1 and \
+        all(isinstance(t, types.Float) for t in proto.types)
 
 
 @intrinsic
@@ -140,6 +142,16 @@ def lanes(typingctx, base, off, proto):
     if W is None:
         return None
     dtype = base.dtype
+    if W > 1 and _dd_proto(proto) and dtype == types.float64 and not isinstance(base, DDLanePtr):
+        rt = DDLanePtr(W)
+
+        def codegen_ddl(context, builder, sig, args):
+            if isinstance(sig.args[0], types.Array):
+                data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            else:
+                data = args[0]
+            return builder.gep(data, [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(2 * W))])
+        return rt(base, off, proto), codegen_ddl
     if _dd_proto(proto) and (dtype == types.float64 or isinstance(dtype, DDType)):
         rt = types.CPointer(dd_t)
 
@@ -222,7 +234,8 @@ def plain(proto):
 @overload(plain, inline="never")
 def _plain(proto):
     if _dd_proto(proto):
-        return lambda proto: (0,)
+        ints = (0,) * len(proto)
+        return lambda proto: ints
     return lambda proto: proto
 
 
@@ -310,6 +323,8 @@ def at(p, off):
 
 @overload(ld, inline="never")
 def _ld(p, i):
+    if isinstance(p, DDLanePtr):
+        return lambda p, i: _ddp_load(p, i)
     if isinstance(p, LanePtr):
         return lambda p, i: _lp_load(p, i)
     if isinstance(p, types.CPointer):
@@ -318,6 +333,13 @@ def _ld(p, i):
 
 @overload(st, inline="never")
 def _st(p, i, v):
+    if isinstance(p, DDLanePtr):
+        def impl_ddl(p, i, v):
+            x = _ddv(v, p)
+            _ddp_store(p, i, x.hi, x.lo)
+        return impl_ddl
+    if isinstance(p, LanePtr) and isinstance(v, DDVec):
+        return lambda p, i, v: _lp_store(p, i, v.hi)       # a double-double into real bookkeeping: its double
     if isinstance(p, LanePtr):
         return lambda p, i, v: _lp_store(p, i, v)
     if _is_dd_ptr(p):
@@ -336,6 +358,9 @@ def _st(p, i, v):
 
 @overload(lget, inline="never")
 def _lget(p, i, lane):
+    if isinstance(p, DDLanePtr):
+        W = p.W
+        return lambda p, i, lane: dd(_ddp_elem(p, i, lane)[0], _ddp_elem(p, i, lane)[W])
     if isinstance(p, LanePtr):
         return lambda p, i, lane: _lp_elem(p, i, lane)[0]
     if isinstance(p, types.CPointer):
@@ -344,6 +369,19 @@ def _lget(p, i, lane):
 
 @overload(lset, inline="never")
 def _lset(p, i, lane, v):
+    if isinstance(p, DDLanePtr):
+        W = p.W
+
+        def impl_ddl(p, i, lane, v):
+            x = as_dd(v)
+            e = _ddp_elem(p, i, lane)
+            e[0] = x.hi
+            e[W] = x.lo
+        return impl_ddl
+    if isinstance(p, LanePtr) and isinstance(v, DDType):
+        def impl_lround(p, i, lane, v):
+            _lp_elem(p, i, lane)[0] = v.hi
+        return impl_lround
     if isinstance(p, LanePtr):
         def impl(p, i, lane, v):
             _lp_elem(p, i, lane)[0] = v
@@ -364,7 +402,7 @@ def _lset(p, i, lane, v):
 
 @overload(nlanes, inline="never")
 def _nlanes(p):
-    if isinstance(p, LanePtr):
+    if isinstance(p, (LanePtr, DDLanePtr)):
         W = p.W
         return lambda p: W
     if isinstance(p, types.CPointer):
@@ -388,7 +426,7 @@ def _binary(op, fop):
 
     @overload(op, inline="never")
     def ov(a, b):
-        if isinstance(a, Vec) or isinstance(b, Vec):
+        if (isinstance(a, Vec) or isinstance(b, Vec)) and all(isinstance(t, Vec) or _real(t) for t in (a, b)):
             return lambda a, b: vop(a, b)
     return vop
 
@@ -397,6 +435,9 @@ _binary(operator.add, "fadd")
 _binary(operator.sub, "fsub")
 _binary(operator.mul, "fmul")
 _binary(operator.truediv, "fdiv")
+_binary(operator.iadd, "fadd")          # (x += y on Vecs: the double-double algorithms use it)
+_binary(operator.isub, "fsub")
+_binary(operator.imul, "fmul")
 
 
 def _compare(op, code):
@@ -414,7 +455,7 @@ def _compare(op, code):
 
     @overload(op, inline="never")
     def ov(a, b):
-        if isinstance(a, Vec) or isinstance(b, Vec):
+        if (isinstance(a, Vec) or isinstance(b, Vec)) and all(isinstance(t, Vec) or _real(t) for t in (a, b)):
             return lambda a, b: vcmp(a, b)
 
 
@@ -621,6 +662,22 @@ def _vsel(typingctx, m, a, b):
 
 @overload(sel, inline="never")
 def _sel(m, a, b):
+    if isinstance(a, DDVec) or isinstance(b, DDVec) or (isinstance(m, Mask) and (_is_dd_scalar(a) or _is_dd_scalar(b))):
+        if isinstance(a, DDVec):
+            def impl_ddv(m, a, b):
+                x, y = a, _ddv(b, a)
+                return ddv(_vsel(m, x.hi, y.hi), _vsel(m, x.lo, y.lo))
+            return impl_ddv
+        if isinstance(b, DDVec):
+            def impl_ddv2(m, a, b):
+                x, y = _ddv(a, b), b
+                return ddv(_vsel(m, x.hi, y.hi), _vsel(m, x.lo, y.lo))
+            return impl_ddv2
+        if isinstance(m, Mask):
+            def impl_ddv3(m, a, b):
+                x, y = _ddv(a, m), _ddv(b, m)
+                return ddv(_vsel(m, x.hi, y.hi), _vsel(m, x.lo, y.lo))
+            return impl_ddv3
     if isinstance(m, Mask) or isinstance(a, Vec) or isinstance(b, Vec):
         return lambda m, a, b: _vsel(m, a, b)
     if isinstance(m, types.Boolean) and (isinstance(a, DDType) or isinstance(b, DDType)):
@@ -712,6 +769,8 @@ def _lmask(m, lane):
 
 @overload(at, inline="never")
 def _at_ov(p, off):
+    if isinstance(p, DDLanePtr):
+        return lambda p, off: _ddp_at(p, off)
     if isinstance(p, LanePtr):
         return lambda p, off: _lp_at(p, off)
     if isinstance(p, types.CPointer):
@@ -748,6 +807,8 @@ def _lp_raw(typingctx, p):
 
 @overload(raw, inline="never")
 def _raw(p):
+    if isinstance(p, DDLanePtr):
+        return lambda p: _ddp_raw(p)
     if isinstance(p, LanePtr):
         return lambda p: _lp_raw(p)
     if isinstance(p, types.CPointer):
@@ -758,7 +819,7 @@ def _raw(p):
 def _re(x):
     if isinstance(x, types.Complex):
         return lambda x: x.real
-    if isinstance(x, DDType):
+    if isinstance(x, (DDType, DDVec)):
         return lambda x: x.hi            # (where a double is wanted: pivot choice, the domain test)
     return lambda x: x
 
@@ -771,8 +832,369 @@ def _is_complex(p):
 
 @overload(step_measure, inline="never")
 def _step_measure(r, scale, cs):
-    if isinstance(r, DDType):
+    if isinstance(r, (DDType, DDVec)):
         return lambda r, scale, cs: abs(r.hi) / scale
     if isinstance(r, types.Complex):
         return lambda r, scale, cs: max(abs(r.real) / scale, abs(r.imag) / (cs * scale))
     return lambda r, scale, cs: abs(r) / scale
+
+
+# -- double-double lanes ---------------------------------------------------------------------------
+#
+# W double-doubles are two <W x double> vectors, hi and lo (:class:`DDVec`); in memory an element of
+# a :class:`DDLanePtr` is 2W doubles, its W high parts then its W low parts.  The arithmetic is
+# integrators/ddouble.py's own (dd_add, dd_mul, dd_div … written with + − × and ``fma``): given
+# vectors, those operations are the packed instructions above and ``llvm.fma.vWf64``, so a lane's
+# bits are the scalar double-double path's.  What branches (√, |x|, comparisons) is written here with
+# selects; the transcendental functions and powers run lane by lane through the scalar code.
+
+
+class DDVec(types.Type):
+    """W double-doubles, one per lane."""
+
+    def __init__(self, W):
+        self.W = W
+        super().__init__(name=f"DDVec{W}")
+
+
+class DDLanePtr(types.Type):
+    """A pointer to W-lane double-double data: element i is doubles [2iW, 2iW + W) (the high
+    parts of lanes 0 … W − 1) and [2iW + W, 2iW + 2W) (their low parts)."""
+
+    def __init__(self, W):
+        self.W = W
+        self.dtype = types.float64
+        super().__init__(name=f"DDLanePtr({W})")
+
+
+@register_model(DDVec)
+class _DDVecModel(models.StructModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, [("hi", Vec(fe_type.W)), ("lo", Vec(fe_type.W))])
+
+
+@register_model(DDLanePtr)
+class _DDLanePtrModel(models.PrimitiveModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, ir.DoubleType().as_pointer())
+
+
+make_attribute_wrapper(DDVec, "hi", "hi")
+make_attribute_wrapper(DDVec, "lo", "lo")
+
+
+def _is_dd_scalar(t):
+    return isinstance(t, DDType)
+
+
+def _pair(context, builder, W, hi, lo):
+    v = cgutils.create_struct_proxy(DDVec(W))(context, builder)
+    v.hi, v.lo = hi, lo
+    return v._getvalue()
+
+
+def _dd_vector_form(hi, lo):
+    """ddouble.dd(hi, lo) for vectors (a real number goes to every lane)."""
+    W = _width(hi, lo)
+    if W is None or not all(isinstance(t, Vec) or _real(t) for t in (hi, lo)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return _pair(context, builder, W, _as_vec(context, builder, sig.args[0], args[0], W),
+                     _as_vec(context, builder, sig.args[1], args[1], W))
+    return DDVec(W)(hi, lo), codegen
+
+
+def _fma_vector_form(a, b, c):
+    """ddouble.fma for vectors: llvm.fma.vWf64, each lane a × b + c rounded once."""
+    W = _width(a, b, c)
+    if W is None or not all(isinstance(t, Vec) or _real(t) for t in (a, b, c)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        vt = ir.VectorType(ir.DoubleType(), W)
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vt, [vt] * 3), f"llvm.fma.v{W}f64")
+        return builder.call(fn, [_as_vec(context, builder, t, x, W) for t, x in zip(sig.args, args)])
+    return Vec(W)(a, b, c), codegen
+
+
+_ddmod.VECTOR_FORMS.update(dd=_dd_vector_form, fma=_fma_vector_form)
+
+
+@intrinsic
+def ddv(typingctx, hi, lo):
+    """W double-doubles from two Vecs (or reals, to every lane)."""
+    return _dd_vector_form(hi, lo)
+
+
+def _lane_width(t):
+    return t.W if isinstance(t, (DDVec, Vec, Mask, DDLanePtr, LanePtr)) else None
+
+
+@intrinsic
+def _splat_dd(typingctx, x, like):
+    """A double-double or a real number (low part 0) in every lane of ``like``'s width."""
+    W = _lane_width(like)
+    if W is None or not (isinstance(x, DDType) or _real(x)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        if isinstance(sig.args[0], DDType):
+            v = cgutils.create_struct_proxy(dd_t)(context, builder, value=args[0])
+            return _pair(context, builder, W, _splat(builder, v.hi, W), _splat(builder, v.lo, W))
+        hi = _as_vec(context, builder, sig.args[0], args[0], W)
+        return _pair(context, builder, W, hi, _splat(builder, ir.Constant(ir.DoubleType(), 0.0), W))
+    return DDVec(W)(x, like), codegen
+
+
+def _ddv(x, like):
+    """x as W double-doubles, W the width of ``like``: itself, a double-double or a number in every
+    lane, a Vec with zero low parts."""
+
+
+@overload(_ddv, inline="never")
+def _ddv_ov(x, like):
+    if isinstance(x, DDVec):
+        return lambda x, like: x
+    if isinstance(x, Vec):
+        return lambda x, like: ddv(x, 0.0)
+    if isinstance(x, DDType) or _real(x):
+        return lambda x, like: _splat_dd(x, like)
+
+
+@intrinsic
+def _ddp_at(typingctx, p, off):
+    if not isinstance(p, DDLanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(2 * sig.args[0].W))])
+    return p(p, off), codegen
+
+
+@intrinsic
+def _ddp_raw(typingctx, p):
+    if not isinstance(p, DDLanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return args[0]
+    return types.CPointer(types.float64)(p), codegen
+
+
+@intrinsic
+def _ddp_load(typingctx, p, i):
+    if not isinstance(p, DDLanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        ptr = builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(2 * W))])
+        vt = ir.VectorType(ir.DoubleType(), W).as_pointer()
+        hi = builder.load(builder.bitcast(ptr, vt), align=8)
+        lo = builder.load(builder.bitcast(builder.gep(ptr, [_W(W)]), vt), align=8)
+        return _pair(context, builder, W, hi, lo)
+    return DDVec(p.W)(p, i), codegen
+
+
+@intrinsic
+def _ddp_store(typingctx, p, i, hi, lo):
+    if not (isinstance(p, DDLanePtr) and isinstance(hi, Vec) and isinstance(lo, Vec)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        ptr = builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(2 * W))])
+        vt = ir.VectorType(ir.DoubleType(), W).as_pointer()
+        builder.store(args[2], builder.bitcast(ptr, vt), align=8)
+        builder.store(args[3], builder.bitcast(builder.gep(ptr, [_W(W)]), vt), align=8)
+        return context.get_dummy_value()
+    return types.void(p, i, hi, lo), codegen
+
+
+@intrinsic
+def _ddp_elem(typingctx, p, i, lane):
+    """Pointer to one lane's high part of element i (its low part is W doubles further)."""
+    if not isinstance(p, DDLanePtr):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        idx = builder.add(builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(2 * W)),
+                          _intp(context, builder, sig.args[2], args[2]))
+        return builder.gep(args[0], [idx])
+    return types.CPointer(types.float64)(p, i, lane), codegen
+
+
+def _ddv_operands(a, b):
+    """The width when (a, b) is a double-double lane operation: one of them W double-doubles, or a
+    double-double scalar beside a Vec; the other a number, Vec, double-double or DDVec."""
+    kinds = (DDVec, DDType, Vec)
+    if not all(isinstance(t, kinds) or (_real(t) and not isinstance(t, types.Boolean)) for t in (a, b)):
+        return None
+    if not (isinstance(a, DDVec) or isinstance(b, DDVec) or
+            (isinstance(a, DDType) and isinstance(b, Vec)) or (isinstance(a, Vec) and isinstance(b, DDType))):
+        return None
+    ws = {t.W for t in (a, b) if isinstance(t, (DDVec, Vec))}
+    return ws.pop() if len(ws) == 1 else None
+
+
+def _dd_like(t):
+    return isinstance(t, (DDVec, DDType))
+
+
+def _ddv_operator(op, fn, fn_d=None):
+    """``op`` on double-double lanes with the scalar path's choice of algorithm: where the scalar code
+    takes a double (fn_d: dd_add_d, dd_mul_d) a lane takes the same (a number or a Vec); elsewhere
+    both operands as double-doubles (fn)."""
+    @overload(op, inline="never")
+    def impl(a, b):
+        W = _ddv_operands(a, b)
+        if W is None:
+            return None
+        like = 0 if isinstance(a, (DDVec, Vec)) else 1          # the operand that gives the width
+        if fn_d is not None and _dd_like(a) and not _dd_like(b):
+            if like == 0:
+                return lambda a, b: fn_d(_ddv(a, a), b)
+            return lambda a, b: fn_d(_ddv(a, b), b)
+        if fn_d is not None and op in (operator.add, operator.mul) and not _dd_like(a) and _dd_like(b):
+            if like == 0:
+                return lambda a, b: fn_d(_ddv(b, a), a)
+            return lambda a, b: fn_d(_ddv(b, b), a)
+        if like == 0:
+            return lambda a, b: fn(_ddv(a, a), _ddv(b, a))
+        return lambda a, b: fn(_ddv(a, b), _ddv(b, b))
+    return impl
+
+
+def _v_lt(a, b):
+    return mor(a.hi < b.hi, mand(a.hi == b.hi, a.lo < b.lo))
+
+
+def _v_eq(a, b):
+    return mand(a.hi == b.hi, a.lo == b.lo)
+
+
+def _v_sub_d(a, b):
+    return _ddmod.dd_add_d(a, -b)
+
+
+def _v_gt(a, b):
+    return _v_lt(b, a)
+
+
+def _v_le(a, b):
+    return mnot(_v_lt(b, a))
+
+
+def _v_ge(a, b):
+    return mnot(_v_lt(a, b))
+
+
+def _v_ne(a, b):
+    return mnot(_v_eq(a, b))
+
+
+def _register_ddv_operators():
+    from numba import njit
+    jit = dict(cache=True, error_model="numpy")
+    fns = {f.__name__: njit(**jit)(f) for f in (_v_lt, _v_eq, _v_gt, _v_le, _v_ge, _v_ne, _v_sub_d)}
+    globals().update(fns)
+    D = _ddmod
+    _ddv_operator(operator.add, D.dd_add, D.dd_add_d)
+    _ddv_operator(operator.sub, D.dd_sub, fns["_v_sub_d"])
+    _ddv_operator(operator.mul, D.dd_mul, D.dd_mul_d)
+    _ddv_operator(operator.truediv, D.dd_div)
+    for op, name in ((operator.lt, "_v_lt"), (operator.gt, "_v_gt"), (operator.le, "_v_le"),
+                     (operator.ge, "_v_ge"), (operator.eq, "_v_eq"), (operator.ne, "_v_ne")):
+        _ddv_operator(op, fns[name])
+
+
+_register_ddv_operators()
+
+
+@overload(operator.neg, inline="never")
+def _ddv_neg(a):
+    if isinstance(a, DDVec):
+        return lambda a: ddv(-a.hi, -a.lo)
+
+
+@njit(cache=True, error_model="numpy")
+def _ddv_abs_impl(a):
+    neg = mor(a.hi < 0.0, mand(a.hi == 0.0, a.lo < 0.0))
+    return ddv(_vsel(neg, -a.hi, a.hi), _vsel(neg, -a.lo, a.lo))
+
+
+@njit(cache=True, error_model="numpy")
+def _ddv_sqrt_impl(a):
+    """dd_sqrt's two branches in every lane, then each lane's own (its bits the scalar path's)."""
+    x = 1.0 / np.sqrt(a.hi)
+    ax = a.hi * x
+    r = _ddmod.dd_add_d(ddv(ax, 0.0), _ddmod.dd_sub(a, _ddmod.dd_sqr(ddv(ax, 0.0))).hi * (x * 0.5))
+    small = a.hi <= 0.0
+    return ddv(_vsel(small, np.sqrt(a.hi), r.hi), _vsel(small, 0.0, r.lo))
+
+
+for _target in (abs, np.abs):
+    @overload(_target, inline="never")
+    def _ddv_abs_ov(a):
+        if isinstance(a, DDVec):
+            return lambda a: _ddv_abs_impl(a)
+
+
+@overload(np.sqrt, inline="never")
+def _ddv_sqrt_ov(a):
+    if isinstance(a, DDVec):
+        return lambda a: _ddv_sqrt_impl(a)
+
+
+@overload(np.isfinite, inline="never")
+def _ddv_isfinite(a):
+    if isinstance(a, DDVec):
+        return lambda a: mand(np.isfinite(a.hi), np.isfinite(a.lo))
+
+
+def _ddv_per_lane_unary(fn):
+    """fn on W double-doubles, lane by lane through the scalar double-double code."""
+    @overload(fn)
+    def ov(a):
+        if isinstance(a, DDVec):
+            W = a.W
+
+            def impl(a):
+                hi, lo = a.hi, a.lo
+                for l in range(W):
+                    r = fn(dd(_vget(a.hi, l), _vget(a.lo, l)))
+                    hi = _vset(hi, l, r.hi)
+                    lo = _vset(lo, l, r.lo)
+                return ddv(hi, lo)
+            return impl
+
+
+for _fn in (np.exp, np.log, np.sin, np.cos, np.tan, np.arcsin, np.arccos, np.arctan, np.sinh, np.cosh, np.tanh,
+            np.sign):
+    _ddv_per_lane_unary(_fn)
+
+
+def _ddv_per_lane_binary(fn):
+    @overload(fn)
+    def ov(a, b):
+        W = _ddv_operands(a, b)
+        if W is None:
+            return None
+
+        def lanewise(x, y):
+            hi, lo = x.hi, x.lo
+            for l in range(W):
+                r = fn(dd(_vget(x.hi, l), _vget(x.lo, l)), dd(_vget(y.hi, l), _vget(y.lo, l)))
+                hi = _vset(hi, l, r.hi)
+                lo = _vset(lo, l, r.lo)
+            return ddv(hi, lo)
+        lanewise = njit(cache=False, error_model="numpy")(lanewise)
+        if isinstance(a, (DDVec, Vec)):
+            return lambda a, b: lanewise(_ddv(a, a), _ddv(b, a))
+        return lambda a, b: lanewise(_ddv(a, b), _ddv(b, b))
+
+
+for _fn in (np.arctan2, np.power, operator.pow):
+    _ddv_per_lane_binary(_fn)
