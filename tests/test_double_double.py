@@ -128,3 +128,140 @@ def test_generated_point_functions_are_double_double_exact(sysname, q0):
         assert abs(value(*got_th[m]) - want) <= 1e-30 * max(abs(want), 1), (m, float(value(*got_th[m]) - want))
     want = H(*x)
     assert abs(value(*got_H) - want) <= 1e-30 * max(abs(want), 1), float(value(*got_H) - want)
+
+
+# -- double-double lanes: W points in two vectors (integrators/simd.py's DDVec) ----------------------
+
+DD_SYSTEMS = ("lotka_volterra_2d", "massless_charged_particle")
+
+
+@pytest.mark.parametrize("sysname", DD_SYSTEMS)
+def test_double_double_lanes_give_the_scalar_paths_bits_on_every_pair(sysname):
+    """11 points (a group of 8 and one of 3 beside 5 empty lanes), 3 steps, W = 8 against W = 1 in
+    double-double: every field of the state (high and low parts) bitwise equal, for every admissible
+    pair (log on Lotka–Volterra, sin and cos on the charged particle: functions taken lane by lane)."""
+    from integrators import TABLEAU_NAMES, kernel
+    sy = integrators.system(sysname)
+    rng = np.random.default_rng(5)
+    q0 = np.array(SYSTEMS[sysname][0]) * (1 + 0.02 * rng.standard_normal((11, sy.d)))
+    h = SYSTEMS[sysname][1]
+    bad, checked = {}, 0
+    for tab in TABLEAU_NAMES:
+        for proj in PROJECTIONS:
+            if admission(integrators.tableau(tab), proj):
+                continue
+            eng = Engine(sy, integrators.tableau(tab), proj, h, precision="double-double")
+            states = []
+            for W in (1, kernel.LANES):
+                st = eng.state(q0)
+                eng.advance(st, 1, 3, lanes=W)
+                states.append(st.checkpoint())
+            diff = [k for k in states[0] if not np.array_equal(states[0][k], states[1][k])]
+            if diff:
+                bad[(tab, proj)] = diff
+            checked += 1
+    assert not bad, bad
+    assert checked > 100 and np.any(states[1]["q"][..., 1] != 0)
+
+
+def test_mixed_double_double_lanes_each_point_gets_the_bits_it_has_alone():
+    """Lotka–Volterra at h = 0.9, where some points leave the domain while their lane neighbours go
+    on with other Newton iteration counts: in double-double lanes each point's state is bitwise its
+    state alone (W = 1), for blocks that split the lanes differently and for two threads."""
+    from integrators import kernel
+    sy = integrators.system("lotka_volterra_2d")
+    rng = np.random.default_rng(7)
+    q0 = np.abs(np.array([1.0, 1.0]) * (1 + 0.6 * rng.standard_normal((21, 2)))) + 0.05
+    eng = Engine(sy, integrators.tableau("GLRK2"), "symmetric", 0.9, precision="double-double")
+
+    def run(q, W, block=64, threads=None):
+        st = eng.state(q)
+        set_threads(threads)
+        try:
+            eng.advance(st, 1, 12, lanes=W, block=block)
+        finally:
+            set_threads(None)
+        return st.checkpoint()
+
+    together = run(q0, kernel.LANES)
+    assert 0 < together["live"].sum() < len(q0)
+    assert len(np.unique(together["iterations"][together["live"]])) > 1
+    for block, threads in ((5, 1), (16, 2)):
+        got = run(q0, kernel.LANES, block, threads)
+        assert all(np.array_equal(together[k], got[k]) for k in together), (block, threads)
+    for i in range(len(q0)):
+        alone = run(q0[i:i + 1], 1)
+        for k in together:
+            assert np.array_equal(together[k][i], alone[k][0]), (i, k)
+
+
+# -- a scene in double-double ------------------------------------------------------------------------
+
+DD_SCENE = """
+name = "lv_dd"
+[system]
+name = "lotka_volterra_2d"
+[loop]
+shape = "ellipse"
+points = 16
+params = { d = 2, center = [1.0, 1.0], radii = [0.05, 0.05] }
+[surface]
+shape = "rectangle"
+n_sigma = 6
+n_tau = 6
+params = { d = 2, center = [1.0, 1.0], size = [0.02, 0.02] }
+[run]
+tableaus = ["GLRK2"]
+projections = ["none", "symmetric"]
+h = 0.1
+steps = 40
+output_every = 4
+precision = "double-double"
+"""
+
+
+def test_a_double_double_scene_says_so_keeps_the_low_parts_and_resumes_bitwise(tmp_path, monkeypatch):
+    """run.precision = "double-double": the file says so, the checkpoint keeps the low parts, the
+    constraint error of the symmetric projection is double-double's (below 1e-26, where the same
+    scene in double sits at double's round-off), and a run stopped after output 8 of GLRK2-none
+    (states every 3rd output) resumes to the uninterrupted run's bits."""
+    import h5py
+    from integrators.service import driver, output
+    from integrators.service.scene import parse_scene
+    from test_service import dump, same, stop_at_output_8
+    scene = parse_scene(DD_SCENE)
+    assert scene.precision == "double-double"
+    full, part, dbl = tmp_path / "full.h5", tmp_path / "part.h5", tmp_path / "double.h5"
+    driver.run(scene, full, progress=False)
+    driver.run(parse_scene(DD_SCENE.replace('precision = "double-double"', "")), dbl, progress=False)
+    run, double = output.read_run(full), output.read_run(dbl)
+    assert run.precision == "double-double" and double.precision == "double"
+    with h5py.File(full) as f:
+        ck = f["runs/GLRK2-symmetric/checkpoint/a"]
+        assert ck["q"].shape == (52, 2, 2) and np.any(ck["q"][..., 1] != 0)
+    sym, sym_double = run["GLRK2-symmetric"].errors, double["GLRK2-symmetric"].errors
+    assert np.max(sym["constraint"]) < 1e-26 < np.max(sym_double["constraint"])
+    # the energy errors agree to double's round-off of them (the same truncation error)
+    assert np.allclose(sym["energy"][1:], sym_double["energy"][1:], rtol=1e-6, atol=1e-15)
+    stop_at_output_8(scene, part, monkeypatch)
+    driver.run(scene, part, progress=False, resume=True)
+    assert same(dump(full, skip=("wall_clock",)), dump(part, skip=("wall_clock",)))
+
+
+def test_an_unknown_precision_is_refused_in_one_line():
+    from integrators.service.scene import SceneError, parse_scene
+    with pytest.raises(SceneError, match="run.precision must be one of"):
+        parse_scene(DD_SCENE.replace('"double-double"', '"quad"'))
+
+
+def test_defect_orders_below_double_floor():
+    """The one-step Ω̄ defect of GLRK2- and GLRK3-standard on the massless charged particle, where
+    double's audit reads nothing below ~1e-13: in double-double the defects fall as h^(2s+2), to
+    below 1e-20 (integrators.audit.defect_dd; docs/audit.md)."""
+    from integrators.audit.defect_dd import defect_study_dd
+    sy = integrators.system("massless_charged_particle")
+    q = np.array([[1.0, 1.0], [1.01, 0.99], [0.99, 1.005]])
+    for tab, order in (("GLRK2", 6), ("GLRK3", 8)):
+        r = defect_study_dd(sy, integrators.tableau(tab), "standard", q, 0.2, levels=4)
+        assert r["order"] is not None and abs(r["order"] - order) < 0.3, (tab, r)
+        assert r["floor"] < 1e-25 and min(r["defect"]) < (1e-16 if tab == "GLRK2" else 1e-20), r

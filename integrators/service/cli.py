@@ -263,6 +263,10 @@ def cmd_run(args) -> int:
                   "where H0 = 0 (a relative error has no scale there), |H − H0|/|H0| elsewhere")
         if note:
             print(f"note: {note}")
+        if scene.precision == "double-double":
+            print("note: run in double-double (run.precision): the states, checkpoints and the energy, momentum and "
+                  "constraint errors are double-double; the invariants are computed from the states rounded to "
+                  "double, so their floor is double's quadrature round-off (docs/invariants.md)")
         _print_user_code()
         return code
     return EXIT_OK

@@ -70,16 +70,29 @@ class Diagnostics:
 
     def __init__(self, scene, system, q0):
         self.scene, self.system = scene, system
-        H0, P0 = _scalars(system, q0)
+        self.dd = getattr(scene, "precision", "double") == "double-double"
+        if self.dd:                 # H0 and P0 as double-doubles (n, 2) of the points' exact doubles
+            from ..engine import scalars_dd
+            q0 = np.asarray(q0, dtype=float)
+            hp = scalars_dd(system, np.stack([q0, np.zeros_like(q0)], axis=-1))
+            H0, P0 = hp[:, 0], hp[:, 1]
+            self.scale = energy_scale(H0[:, 0])
+        else:
+            H0, P0 = _scalars(system, q0)
+            self.scale = energy_scale(H0)
         self.H0 = H0
-        self.scale = energy_scale(H0)
         self.P0 = P0 if "momentum" in scene.diagnostics else None
 
     def point_errors(self, q, p, live) -> dict:
         """{'energy_error': …, …}: the largest error over the live points of this block (0 if none; NaN
-        if one is NaN).  One compiled pass over the points (the system's generated H, momentum and ϑ)."""
+        if one is NaN).  One compiled pass over the points (the system's generated H, momentum and ϑ);
+        for a double-double state (q, p of shape (n, d, 2)) H, the momentum and ϑ are evaluated in
+        double-double and each difference is taken there before it is rounded to double."""
         from ..engine import point_functions, scalar_function
         sc, sy = self.scene, self.system
+        if np.ndim(q) == 3 or self.dd:         # (doubles in a double-double run: taken exactly)
+            pairs = lambda x: x if np.ndim(x) == 3 else np.stack([x, np.zeros_like(x)], axis=-1)
+            return self._point_errors_dd(pairs(np.asarray(q, dtype=float)), pairs(np.asarray(p, dtype=float)), live)
         ev, _ = point_functions(sy)
         d = sy.d
         out = np.zeros(3)
@@ -90,6 +103,24 @@ class Diagnostics:
         names = (("energy", "energy_error", 0), ("momentum", "momentum_error", 1),
                  ("constraint", "constraint_error", 2))
         return {key: float(out[i]) for what, key, i in names if what in sc.diagnostics}
+
+    def _point_errors_dd(self, q, p, live) -> dict:
+        from ..engine import scalars_dd, theta_dd
+        sy, live = self.system, np.asarray(live, dtype=bool)
+        out = np.zeros(3)
+        if live.any():
+            q, p = np.ascontiguousarray(q[live]), np.asarray(p[live])
+            hp, th = scalars_dd(sy, q), theta_dd(sy, q)
+            H0 = self.H0[live]
+            P0 = (self.P0 if self.P0 is not None else self.H0)[live]
+            with np.errstate(all="ignore"):
+                errs = (np.abs(dd_difference(hp[:, 0], H0)) / self.scale[live],
+                        np.abs(dd_difference(hp[:, 1], P0)),
+                        np.max(np.abs(dd_difference(p, th)), axis=1))
+            out[:] = [np.max(e) for e in errs]           # (numpy's max: a NaN wins)
+        names = (("energy", "energy_error", 0), ("momentum", "momentum_error", 1),
+                 ("constraint", "constraint_error", 2))
+        return {key: float(out[i]) for what, key, i in names if what in self.scene.diagnostics}
 
     def invariant(self, spec, form, q, p, lam, live):
         """(value, resolution, computed) of one form of one set's invariant; points shaped as the set's grid.
@@ -168,6 +199,16 @@ def energy_scale(H0):
     H0 = 0 (an absolute error: a relative one has no scale there, and would be NaN at every output)."""
     H0 = np.asarray(H0, dtype=float)
     return np.where(H0 != 0, np.abs(H0), 1.0)
+
+
+def dd_difference(a, b):
+    """a − b rounded to double, for double-double arrays a, b (…, 2) of (hi, lo) pairs: the high
+    parts' difference exactly (TwoSum) plus the low parts', so the result is the exact difference to
+    about 1e-32 of |a| (where double's a − b would keep only the high parts' rounding)."""
+    s = a[..., 0] - b[..., 0]
+    bb = s - a[..., 0]
+    e = (a[..., 0] - (s - bb)) + (-b[..., 0] - bb)
+    return s + (e + (a[..., 1] - b[..., 1]))
 
 
 def _params(system):

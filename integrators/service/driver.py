@@ -252,7 +252,8 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
                 if path.exists():
                     replacing = Replacement(path.resolve())      # (through a symlink: its target)
                     target = replacing.new
-                f = output.create(target, scene, version, n, State.schema(n, system.d, scene.max_stages), UNDER_RESOLVED)
+                f = output.create(target, scene, version, n, State.schema(n, system.d, scene.max_stages, scene.precision),
+                                  UNDER_RESOLVED)
             if "energy" in scene.diagnostics:       # where a relative energy error has no scale
                 from .diagnostics import _scalars
                 output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
@@ -351,7 +352,7 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         s_tab = 1
     else:
         def make_engine():
-            return Engine(system, scene.tableau(tab_name), proj, h)
+            return Engine(system, scene.tableau(tab_name), proj, h, precision=scene.precision)
         s_tab = scene.tableau(tab_name).s
     engine = make_engine()
     clock = pair_clock()
@@ -544,7 +545,7 @@ class _Stream:
             piece = {k: np.array(v) for k, v in st.checkpoint().items()}
         else:                    # what rows need of the points (breakdown times only at a batch's end)
             piece = ({"breakdown_time": st.breakdown_time.copy()} if flush else {}) | \
-                ({"q": st.q.copy()} if self.scene.store_points else {})
+                ({"q": st.nearest()[0].copy()} if self.scene.store_points else {})
         pair.held.append(Output(step, checkpoint, pair.diagnostics.point_errors(st.q, st.p, st.live), parts, piece))
         self.spent.charge(pair.clock, "invariants", time.perf_counter() - t0)
         if flush:
@@ -561,7 +562,7 @@ class _Stream:
             output.write_slab(self.slabs, name, st.checkpoint(), self.scene.max_stages)
             piece["slab"] = [(name, lo, hi)]
         if self.scene.store_points:
-            piece["q"] = st.q.copy()
+            piece["q"] = st.nearest()[0].copy()
         self.spent.charge(pair.clock, "hdf5", time.perf_counter() - t0)
         return piece
 

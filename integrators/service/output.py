@@ -3,7 +3,10 @@
 Layout (format ``poincare/2``)::
 
     /                       attrs: format, scene (TOML text), version, system, created,
-                                   resolution_threshold (the monitor value above which a set is under-resolved)
+                                   resolution_threshold (the monitor value above which a set is under-resolved),
+                                   precision ("double", or "double-double": run.precision; the
+                                   checkpoint's value arrays then have a last axis of 2, hi and lo,
+                                   and the errors below are differences taken in double-double)
     /runs/<TABLEAU>-<projection>/
         t                   (n,)       output times
         I1/<form>, I2/<form> (n,)      invariants (only the forms asked for; I2 only with a surface)
@@ -228,6 +231,7 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
     f.attrs["steps"] = scene.steps          # run.steps in force (the command line may override the text)
     f.attrs["version"] = version
     f.attrs["system"] = scene.system_name
+    f.attrs["precision"] = scene.precision        # the engine's numbers: "double" or "double-double"
     f.attrs["resolution_threshold"] = threshold
     f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     if scene.tableau_files:                 # a resume must find the same coefficients, not only the name
@@ -909,6 +913,7 @@ class Run:
     scene: str
     steps: int
     pairs: dict
+    precision: str = "double"        # the engine's numbers (root attribute; files before it: double)
 
     def __getitem__(self, name):
         return self.pairs[name]
@@ -917,7 +922,8 @@ class Run:
         counts = {}
         for p in self.pairs.values():
             counts[p.status] = counts.get(p.status, 0) + 1
-        return (f"<Run '{self.path}': {self.system}, {len(self.pairs)} pairs "
+        prec = "" if self.precision == "double" else f" in {self.precision}"
+        return (f"<Run '{self.path}': {self.system}{prec}, {len(self.pairs)} pairs "
                 f"({', '.join(f'{v} {k}' for k, v in counts.items())}), {self.steps} steps; "
                 "run.pairs by name, run[name] one pair>")
 
@@ -937,16 +943,19 @@ class Run:
             ds = p.to_xarray(forms)
             parts.append(ds.assign(status=((), p.status), wall_time=((), p.wall_time)).expand_dims(pair=[name]))
         if not parts:
-            return xr.Dataset(attrs={"path": self.path, "system": self.system, "steps": self.steps})
+            return xr.Dataset(attrs={"path": self.path, "system": self.system, "steps": self.steps,
+                                     "precision": self.precision})
         ds = xr.concat(parts, dim="pair", join="outer", combine_attrs="drop_conflicts", data_vars="all",
                        coords="different", compat="equals")
-        ds.attrs.update(path=self.path, system=self.system, steps=self.steps, format=self.format)
+        ds.attrs.update(path=self.path, system=self.system, steps=self.steps, format=self.format,
+                        precision=self.precision)
         for key in ("pair", "status", "wall_time"):
             ds.attrs.pop(key, None)
         return ds
 
     def _repr_html_(self):
-        return (f"<p><b>poincare run</b> <code>{_esc(self.path)}</code>: {_esc(self.system)}, {self.steps} steps, "
+        prec = "" if self.precision == "double" else f" in {_esc(self.precision)}"
+        return (f"<p><b>poincare run</b> <code>{_esc(self.path)}</code>: {_esc(self.system)}{prec}, {self.steps} steps, "
                 f"{len(self.pairs)} pairs</p>" + _html_table(list(self.pairs.values())))
 
     def grid(self) -> tuple:
@@ -1053,7 +1062,8 @@ def read_run(path) -> Run:
                                          if k.startswith("under_resolved_from/")},
                     growth=_growth_attrs(g), points_used=sets("points_used"))
             return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
-                       scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs)
+                       scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs,
+                       precision=str(f.attrs.get("precision", "double")))
     except (DamagedFile, BusyFile, FileNotFoundError):
         raise
     except (OSError, KeyError, ValueError, RuntimeError, TypeError, MemoryError, AttributeError) as exc:

@@ -66,7 +66,8 @@ class Refiner:
             self.seconds += time.perf_counter() - t0
             self.point_steps += (step - at) * st.q.shape[0]
             self.levels[level][2] = step
-        return st.q, st.p, st.Lam / self.h, st.live
+        q, p, Lam = st.nearest()
+        return q, p, Lam / self.h, st.live
 
     def grid(self, level, step, base_parts):
         """The set's points at level ``level`` (its grid's shape): the set's own points

@@ -51,6 +51,10 @@ A scene file::
     diagnostics = ["energy", "momentum", "constraint"]   # default: all three ("momentum" only where the
                                           # system has one: a symmetry or a momentum expression)
     store_points = false                  # also store every sample point at every output
+    precision = "double"                  # or "double-double" (~32 digits, the compiled engine's third
+                                          # specialisation): states, checkpoints and the energy, momentum
+                                          # and constraint errors in double-double; the invariants from
+                                          # the states rounded to double.  Not with step_maps.
 
     [output]
     path = "my-run.h5"
@@ -75,6 +79,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..engine import PRECISIONS
 from ..projections import PROJECTIONS, admission
 from ..systems import SYSTEM_NAMES, system as builtin_system
 from ..tableaus import tableau as builtin_tableau
@@ -203,6 +208,7 @@ class Scene:
     system_spec: dict = dataclasses.field(default_factory=dict)   # the [system] table (user systems)
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
     step_maps: tuple = ()            # run.step_maps specs, in order
+    precision: str = "double"        # run.precision: the engine's numbers ("double" or "double-double")
     _built: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)   # system, tableaus: made once
 
     @property
@@ -310,7 +316,7 @@ _SCHEMA = {
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
-            "forms": list, "diagnostics": list, "store_points": bool},
+            "forms": list, "diagnostics": list, "store_points": bool, "precision": str},
     "output": {"path": str, "checkpoint_seconds": float, "checkpoints": str},
 }
 RUN_KEYS = tuple(_SCHEMA["run"])      # what integrators.service.run(..., **overrides) may set
@@ -451,6 +457,12 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
             why = admission(tab, p)
             if why:
                 raise SceneError(f"run: {why}")
+    precision = run.get("precision", "double")
+    if precision not in PRECISIONS:
+        raise SceneError(f"run.precision must be one of {', '.join(map(repr, PRECISIONS))}, got {precision!r}")
+    if precision != "double" and maps:
+        raise SceneError("run.precision = \"double-double\" is the compiled engine's: a step map (run.step_maps) "
+                         "runs in double; give it a scene of its own")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
     for key, value in (("name", name), ("system.name", sysd.get("name", ""))):
         if not value.isprintable():
@@ -466,7 +478,7 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
                   checkpoint_seconds=ck_seconds, checkpoints=ck_mode,
-                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps)
+                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps, precision=precision)
     _check_memory(scene, system)
     _check_points(scene, system)
     for label in {step_map_label(m) for m in maps}:
@@ -587,7 +599,7 @@ def _tableaus(entries, base):
 MEMORY_BASE = 400 * 2**20        # the interpreter, numpy, numba, MPI and HDF5 of one rank (measured ~300 MiB)
 
 
-def memory_per_point(d, s) -> tuple:
+def memory_per_point(d, s, precision="double") -> tuple:
     """(bytes one sample point costs the rank that advances it, bytes of its state).  The cost: its
     state (:class:`integrators.engine.State`), Newton factors of a pair with s stages (assuming the
     largest system a projection solves, (s + 2)·d unknowns) and its part of the invariants'
@@ -595,8 +607,9 @@ def memory_per_point(d, s) -> tuple:
     3.0 KiB; measured 1.8-2.3 KiB (docs/benchmarks.md)."""
     from ..engine import State
     nz = (s + 2) * d
-    state = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, d, s).values())
-    return state + 8 * (nz * nz + nz) + 8 * 20 * d, state
+    state = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, d, s, precision).values())
+    factors = 8 * (nz * nz + nz) * (2 if precision == "double-double" else 1)
+    return state + factors + 8 * 20 * d, state
 
 
 def available_memory() -> float | None:
@@ -634,7 +647,7 @@ def _check_memory(scene, system):
     n, d = scene.n_points, system.d
     s = scene.max_stages
     local = _local_ranks()
-    per_point, state = memory_per_point(d, s)
+    per_point, state = memory_per_point(d, s, scene.precision)
     # every local rank holds all points' samples and set values (~16 arrays of d doubles) and
     # advances its share; rank 0 also gathers every point's state for a checkpoint
     need = local * (MEMORY_BASE + 8 * 16 * d * n) + (per_point + state) * n
@@ -706,7 +719,7 @@ _KEYS = {"system_name": "system.name", "system_params": "system.params", "system
          "loop": "loop", "surface": "surface", "step_maps": "run.step_maps",
          "tableaus": "run.tableaus", "projections": "run.projections", "h": "run.h", "steps": "run.steps",
          "output_every": "run.output_every", "forms": "run.forms", "diagnostics": "run.diagnostics",
-         "store_points": "run.store_points"}
+         "store_points": "run.store_points", "precision": "run.precision"}
 
 
 def scene_differences(a: Scene, b: Scene) -> list:

@@ -94,7 +94,8 @@ class Tasks:
         """This rank's part of each sample set (copies of q, p, λ, live: the state moves on);
         ``block`` = (lo, hi), the rows it advances."""
         lo, hi = block
-        mine = (st.q, st.p, st.Lam / self.scene.h, st.live)
+        q, p, Lam = st.nearest()             # (a double-double run's invariants: from its states rounded to double)
+        mine = (q, p, Lam / self.scene.h, st.live)
         out = []
         for _, rows in self.scene.sample_sets:
             a, b = max(lo, rows.start), min(hi, rows.stop)
