@@ -566,6 +566,13 @@ class Engine:
         self._cfg_dd[1] *= scale
         self._functions = {}
 
+    def _layout(self):
+        """kernel.layout of this pair as the three int64 arrays the kernel takes."""
+        if not hasattr(self, "_lay"):
+            from .kernel import layout
+            self._lay = tuple(np.array(rec, dtype=np.int64) for rec in layout(self.tableau.s, self.system.d, self.nz))
+        return self._lay
+
     def state(self, q, p=None, lam=None, dtype=np.float64):
         """The state of points q (n, d) with p = ϑ(q) unless given and λ = 0 unless given; in the
         engine's precision (double-double: q, p, λ may be (n, d, 2) pairs or doubles, taken exactly,
@@ -601,7 +608,7 @@ class Engine:
             ev, inside, W = self._functions[key]
             kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
                            int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
-                           (0.0,) * W)
+                           (0.0,) * W, self._layout())
             return
         cplx = bool(np.iscomplexobj(state.q))
         if cplx:
@@ -615,7 +622,7 @@ class Engine:
             self._functions[key] = ev, inside, W
         ev, inside, W = self._functions[key]
         kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
-                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W)
+                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W, self._layout())
 
 
 class MapEngine:

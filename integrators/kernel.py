@@ -34,6 +34,7 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
+from numba.np.unsafe.ndarray import to_fixed_tuple
 from numba.extending import overload
 
 from .ddouble import DDType, dd
@@ -155,27 +156,72 @@ Flags.__doc__ = "Offsets of the per-lane real (never complex) bookkeeping."
 IntScratch = namedtuple("IntScratch", "piv pivt ipiv size")
 
 
-@njit(**_OPTS)
+D_VECTORS = Scratch._fields[Scratch._fields.index("qbar"):Scratch._fields.index("qr") + 1]
+
+
+def _offsets(record, sizes):
+    """record(offset of each field, in the order of the fields, …, total): the buffers laid end to end."""
+    out, at_ = [], 0
+    for name in record._fields[:-1]:
+        out.append(at_)
+        at_ += sizes[name]
+    return record(*out, at_)
+
+
 def layout(s, d, nz):
-    """The three scratch layouts of a group (:class:`Scratch`, :class:`Flags`, :class:`IntScratch`):
-    each buffer's offset, in the order of the fields, and the total size last."""
+    """The three scratch layouts of a group (:class:`Scratch`, :class:`Flags`, :class:`IntScratch`),
+    each buffer's size given by its name: the offsets in the order of the fields, the total last.
+    Made in Python (Engine._layout, probe) and handed to the kernel as three int64 arrays, which it
+    turns back into the records (:func:`_records`: numba's parallel loop takes no named tuples)."""
     dd, sd = d * d, s * d
-    sizes = (sd, sd, s * dd, s * dd * d, sd, s * dd, sd, s * dd,      # Q th T TT dH HH G K
-             3 * d, 3 * dd, 3 * dd * d, 3 * d, 3 * dd,                 # pth pT pTT pdH pHH
-             d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d, d,   # qbar … qr
-             nz, nz, nz, nz * nz, 2 * dd, dd, d, d, d, dd, sd, d,       # z zev r Jt S PL pz pzev pr pJ guess zero
-             d, d, d, d, d, sd, d, nz * nz)                            # q p lam qc pc Y mu lu
-    o = [0] * (len(sizes) + 1)
-    for i in range(len(sizes)):
-        o[i + 1] = o[i] + sizes[i]
-    S = Scratch(o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8], o[9], o[10], o[11], o[12], o[13], o[14],
-                o[15], o[16], o[17], o[18], o[19], o[20], o[21], o[22], o[23], o[24], o[25], o[26], o[27], o[28],
-                o[29], o[30], o[31], o[32], o[33], o[34], o[35], o[36], o[37], o[38], o[39], o[40], o[41], o[42],
-                o[43], o[44], o[45], o[46], o[47], o[48], o[49], o[50], o[51], o[52], o[53], o[54])
-    f = nz + d                      # after scale (nz) and pscale (d), one number a lane each
-    F = Flags(0, nz, f, f + 1, f + 2, f + 3, f + 4, f + 5, f + 6, f + 7, f + 8, f + 9, f + 10, f + 11, f + 12,
-              f + 13, f + 14, f + 15, f + 16)
-    return S, F, IntScratch(0, nz, 2 * nz, 2 * nz + d)
+    S = _offsets(Scratch, dict(
+        Q=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
+        pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
+        **dict.fromkeys(D_VECTORS, d),
+        z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd, zero=d,
+        q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz))
+    F = _offsets(Flags, dict(scale=nz, pscale=d, **dict.fromkeys(Flags._fields[2:-1], 1)))
+    IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d))
+    return S, F, IP
+
+
+Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh accept velocity")
+Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
+:meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
+``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
+``maxiter`` iterations; a fresh Jacobian after an iteration that contracted by less than
+``refresh``; ``accept`` (≠ 0) takes a finite unconverged iterate after maxiter; ``velocity`` (≠ 0)
+adds h·q̇(q_n) to the stage predictor."""
+
+StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
+                                        "lu piv have_lu")
+StateArrays.__doc__ = """The per-point arrays of integrators.engine.State as the kernel takes them (State._tuple:
+a plain tuple in this order, the boolean flags viewed as uint8; value arrays with a last axis of 2
+in double-double)."""
+
+MODE_MAIN, MODE_POST = 0, 1     # what _newton solves: the step's equations, or the consecutive projection
+
+
+N_SCRATCH, N_FLAGS, N_INT = len(Scratch._fields), len(Flags._fields), len(IntScratch._fields)
+
+
+@njit(inline='always', **_OPTS)
+def _records(lay):
+    """The :func:`layout` records from their arrays (Engine._layout)."""
+    return (Scratch(*to_fixed_tuple(lay[0], N_SCRATCH)), Flags(*to_fixed_tuple(lay[1], N_FLAGS)),
+            IntScratch(*to_fixed_tuple(lay[2], N_INT)))
+
+
+@njit(inline='always', **_OPTS)
+def _newton_rule(c):
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6])
+
+
+@njit(inline='always', **_OPTS)
+def _runtime(k, like):
+    """The integer k as a value the compiler cannot fold into a constant (``like`` is any runtime
+    integer): a literal argument would compile the callee once per value (``_newton``'s mode)."""
+    return like - like + k
 
 
 # -- small dense linear algebra, per lane ---------------------------------------------------------
@@ -495,7 +541,7 @@ def _post(z, jac, r, J, ev, k, sig, d, w, S):
 def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP, cfg):
     """Newton's method with the exact Jacobian, kept while it contracts, for every active lane.
 
-    ``mode`` 0 solves the step's equations (:func:`_main`), 1 the consecutive projection
+    ``mode`` MODE_MAIN solves the step's equations (:func:`_main`), MODE_POST the consecutive projection
     (:func:`_post`).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
     ``known``: LU and piv hold its last step's factors) and again after an iteration that shrank
     its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ TOL, or ≤ STALL once
@@ -503,22 +549,22 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
     same test.  A lane that is done is held at its solution ``zev`` (the last iterate at which its
     residual was evaluated; every buffer the equations fill holds that evaluation) while the others
     go on.  Lanes to solve: ``f.active``; the outcome per lane in ``f.ok`` and ``f.its``.  The
-    tolerances are runtime data, ``cfg`` = [TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT]
-    (:class:`integrators.engine.Tolerances`); with ACCEPT a finite iterate that has not converged
-    after MAXITER iterations is taken (GeometricIntegrators.jl's stopping rule).
+    tolerances are runtime data, ``cfg`` a :class:`Newton` record (:class:`integrators.engine.Tolerances`);
+    with ``cfg.accept`` a finite iterate that has not converged after ``cfg.maxiter`` iterations is
+    taken (GeometricIntegrators.jl's stopping rule).
     """
     W = nlanes(z)           # (mode and nz arrive as runtime ints: a literal would compile this twice)
-    tol, refresh = cfg[0], cfg[4]
+    tol, refresh = cfg.tol, cfg.refresh
     active = ld(f, F.active) != 0.0
     st(f, F.done, sel(active, 0.0, 1.0))
     st(f, F.ok, 0.0)
     st(f, F.its, 0.0)
     st(f, F.prev, np.inf)
     st(f, F.stale, sel(mand(active, mnot(known)), 1.0, 0.0))
-    scale = at(f, F.scale if mode == 0 else F.pscale)
-    Jt = at(w, S.Jt if mode == 0 else S.pJ)
+    scale = at(f, F.scale if mode == MODE_MAIN else F.pscale)
+    Jt = at(w, S.Jt if mode == MODE_MAIN else S.pJ)
     pivt = at(ip, IP.pivt)
-    for _ in range(int(cfg[3])):
+    for _ in range(int(cfg.maxiter)):
         done = ld(f, F.done) != 0.0
         if not anyl(mnot(done)):
             break
@@ -529,7 +575,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
             st(zev, i, zi)
         jac = anyl(stale)
         Jx, pivx = (LU, piv) if W == 1 else (Jt, pivt)   # one lane: factorise in place
-        if mode == 0:
+        if mode == MODE_MAIN:
             _main(z, jac, r, Jx, ev, k, h, tb, plan, d, s, w, S)
         else:
             _post(z, jac, r, Jx, ev, k, plan.sigma, d, w, S)
@@ -557,7 +603,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
         st(f, F.norm, size)
         st(f, F.nan, sel(nan, 1.0, 0.0))
         st(f, F.finite, sel(finite, 1.0, 0.0))
-        stall = cfg[2] if is_complex(z) else cfg[1]
+        stall = cfg.stall_complex if is_complex(z) else cfg.stall
         for l in range(W):
             if lget(f, F.done, l) != 0.0:
                 continue
@@ -576,7 +622,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
             lset(f, F.stale, l, 1.0 if np.isfinite(theta) and theta > refresh else 0.0)
             lset(f, F.prev, l, sz)
     for l in range(W):                            # lanes out of iterations
-        if lget(f, F.done, l) == 0.0 and cfg[5] != 0 and lget(f, F.its, l) > 0:
+        if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)
 
 
@@ -671,7 +717,7 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
         if plan.lobatto:
             st(z, iM + m, ld(mu0, m))
             st(f, F.scale + iM + m, _scale(ld(pbar, m)))
-    _newton(nz - nz, z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP,
+    _newton(_runtime(MODE_MAIN, nz), z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP,
             cfg)
     ok = ld(f, F.ok) != 0.0
     its = ld(f, F.its)
@@ -691,7 +737,7 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
             st(ph, m, ld(pbar, m) + ld(sG, m))
             st(pz, m, ld(lam, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
-        _newton(nz - nz + 1, pz, pzev, pr, nz - nz + d, at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, k, h, tb,
+        _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, k, h, tb,
                 plan, d, s, w, S, f, F, ip, IP, cfg)
         ok = mand(ok, ld(f, F.ok) != 0.0)
         its = its + ld(f, F.its)
@@ -753,7 +799,7 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
     fresh = ld(f, F.hist) == 0.0
     c = _coefficients(tb, s)
     Ys, guess, v = at(w, S.Y), at(w, S.guess), at(w, S.vf)
-    velocity = cfg[6] != 0.0                    # the predictor: with h·q̇(q_n) as a node at 0
+    velocity = cfg.velocity != 0.0              # the predictor: with h·q̇(q_n) as a node at 0
     if velocity:
         _velocity(ev, k, at(w, S.q), h, v, mnot(fresh), d, w, S, ip, IP)
     for i in range(s):                          # Lagrange extrapolation of the last step's stages
@@ -791,7 +837,8 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
 def _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP):
     """The state of points pt0 … pt0 + nl − 1 into the lanes (lanes past nl copy the first point and
     stay dead)."""
-    q, p, Lam, qc, pc, Y, mu, hist, live, tbrk, itn, stp, lu, piv, have = st_
+    q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
+    hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
     for l in range(W):
         pt = pt0 + (l if l < nl else 0)
         for m in range(d):
@@ -820,7 +867,10 @@ def _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP):
 
 @njit(**_OPTS)
 def _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP):
-    q, p, Lam, qc, pc, Y, mu, hist, live, tbrk, itn, stp, lu, piv, have = st_
+    """The lanes' state back into points pt0 … pt0 + nl − 1."""
+    q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
+    hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
+    itn, stp = st_.iterations, st_.steps
     for l in range(nl):
         pt = pt0 + l
         for m in range(d):
@@ -846,7 +896,7 @@ def _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP):
 
 
 @njit(**_OPTS)
-def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto):
+def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto, lay):
     """Points lo … hi − 1 of the state through ``nsteps`` steps, W (= len(proto)) at a time, with
     the thread's scratch arrays.
 
@@ -854,11 +904,12 @@ def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nstep
     call, while numba would free a local array after its last use as an array, i.e. while the raw
     pointers taken from it are still in use.
     """
-    S, F, IP = layout(s, d, nz)       # (made here: numba's parallel loop takes no named tuples)
-    plan = Plan(*plan)
+    # the records by name (made here: numba's parallel loop takes no named tuples)
+    S, F, IP = _records(lay)
+    plan, st_, cfg = Plan(*plan), StateArrays(*st_), _newton_rule(cfg)
     W = len(proto)
     w, f, ip, qr = lanes(WS, 0, proto), lanes(FS, 0, plain(proto)), lanes(IS, 0, plain(proto)), _at(QR, 0)
-    live = st_[8]
+    live = st_.live
     for pt0 in range(lo, hi, W):
         nl = min(W, hi - pt0)
         alive = False
@@ -874,24 +925,25 @@ def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nstep
 
 
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto):
+def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay):
     """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
     ``first`` aiming at t0 + first·h.  Points are taken ``block`` at a time, blocks spread over the
     threads, and W = len(proto) at a time within a block (``ev`` must be the W-lane point function);
     a point's steps never depend on its block, its lanes, its thread or its neighbours.
 
-    st_ = (q, p, Lam, q_comp, p_comp, Y, mu, have_history, live, breakdown_time, iterations, steps,
-    lu, piv, have_lu), the boolean flags viewed as uint8.  ``tolerances``: Newton's [TOL, STALL,
-    STALL_COMPLEX, MAXITER, REFRESH, ACCEPT] as float64 (:class:`integrators.engine.Tolerances`);
+    ``st_``: the :class:`StateArrays` as a plain tuple; ``tolerances``: the float64 array of a
+    :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``lay``: :func:`layout` as
+    three int64 arrays (Engine._layout).
     """
-    q, Y, lu = st_[0], st_[5], st_[12]
+    arrays = StateArrays(*st_)
+    q, Y, lu = arrays.q, arrays.Y, arrays.lu
     n = q.shape[0]
     d = len(dim)           # ``dim`` is a tuple of d zeros: d is a compile-time constant, one compilation
     #                        per dimension, and the compiler unrolls the loops over coordinates
     s = Y.shape[1]
     nz = lu.shape[1]
     W = len(proto)
-    S, F, IP = layout(s, d, nz)
+    S, F, IP = _records(lay)
     nw, nf, ni = S.size * W, F.size * W, IP.size * W
     kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
     nblocks = (n + block - 1) // block
@@ -901,7 +953,7 @@ def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tol
         IS = np.zeros(ni, np.int64)
         QR = np.zeros(d)
         _block(WS, FS, IS, QR, bi * block, min(n, (bi + 1) * block), ev, inside, kp, h, tb, plan, t0, first, nsteps,
-               st_, d, s, nz, cfg, proto)
+               st_, d, s, nz, cfg, proto, lay)
 
 
 @njit(**_OPTS)
