@@ -114,7 +114,7 @@ def test_the_api_reference_builds_without_warnings(tmp_path):
     every page documents objects."""
     exe = Path(sys.executable).parent / "mkdocs"
     if not exe.exists():
-        pytest.fail("mkdocs is not installed: pip install . installs it (pyproject.toml)")
+        pytest.fail("mkdocs is not installed: pip install \".[test]\" installs it (pyproject.toml's test extra)")
     r = subprocess.run([str(exe), "build", "--strict", "-f", str(ROOT / "docs/api/mkdocs.yml"), "-d", str(tmp_path)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
