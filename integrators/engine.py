@@ -551,7 +551,6 @@ class Engine:
         s, d = tableau.s, system.d
         lob = tableau.d is not None
         self.plan = kernel.Plan(*rec.codes(tableau), lob)
-        self.codes = self.plan                  # (the name tests and scripts used before it was a Plan)
         self.nz = (s + (1 if rec.coupled else 0) + (1 if lob else 0)) * d
         self.k = np.array([float(v) for v in system.params.values()], dtype=np.float64)
         self.tolerances = tolerances if tolerances is not None else Tolerances()

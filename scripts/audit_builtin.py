@@ -1,6 +1,7 @@
 """Audit every built-in tableau × projection (docs/audit.md).
 
     python scripts/audit_builtin.py [--out docs/figures/audit_builtin.json] [--tableaus GLRK1 ...]
+    python scripts/audit_builtin.py --signs     # only the midpoint projection with either sign (its table)
 
 For each pair: invariant drift and one-step defects on the 'default' scene
 (guiding_centre_symmetric, h = 10, 100 steps), and one-step defects on the
@@ -40,7 +41,7 @@ def midpoint_with_sign(tab, sigma):
     def step(q, p, lam, h, system):
         if h not in cache:
             eng = Engine(system, tab, "midpoint", h)
-            eng.codes = eng.codes[:4] + (float(sigma),) + eng.codes[5:]     # (pre, pre_at, post, post_at, σ, lobatto)
+            eng.plan = eng.plan._replace(sigma=float(sigma))     # the post term's weight, as the kernel reads it
             cache[h] = eng
         eng = cache[h]
         dtype = np.complex128 if np.iscomplexobj(q) else np.float64
@@ -77,7 +78,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "audit_builtin.json"))
     ap.add_argument("--tableaus", nargs="+", default=list(integrators.TABLEAU_NAMES))
+    ap.add_argument("--signs", action="store_true", help="only the midpoint projection with either sign")
     args = ap.parse_args()
+    if args.signs:
+        midpoint_signs()
+        return
     t0 = time.perf_counter()
     cands = [c for tab in args.tableaus for c in audit.candidates_from(tab)]
     base = audit.audit(cands, load_scene("default"), progress=lambda m: print(m, flush=True))
