@@ -21,30 +21,7 @@ import math
 
 import numpy as np
 import sympy
-from sympy.printing.numpy import NumPyPrinter
-
-
-class _Printer(NumPyPrinter):
-    """numpy printer that prints every symbol by the safe name it was given.
-
-    The generated code never sees a user's names: coordinates become ``_q0, _q1, …``, parameters
-    ``_k0, _k1, …`` and common subexpressions ``_x0, …`` (sympy Dummies, so a user symbol
-    spelled ``_x0`` cannot be mistaken for one), and numpy is reached as ``numpy.…`` only.  So a
-    coordinate called ``q``, ``out`` or ``np``, or a parameter called ``e``, ``pi``, ``sqrt`` or
-    ``lambda``, means exactly that symbol.
-    """
-
-    def __init__(self, names):
-        super().__init__({"fully_qualified_modules": True, "allow_unknown_functions": False})
-        self.names = names
-
-    def _print_Symbol(self, expr):
-        try:
-            return self.names[expr]
-        except KeyError:
-            raise ValueError(f"no value for symbol '{expr}'") from None
-
-    _print_Dummy = _print_Symbol
+from .codegen import _Printer
 
 
 def _compile(exprs, shape, qsyms, params, name):
@@ -194,7 +171,7 @@ class System:
                 bad = _not_finite(e)
                 if bad:
                     raise ValueError(f"{key} is not finite: it contains {bad} (a division by zero, or log of 0?)")
-        from .engine import generate_source
+        from .codegen import generate_source
         try:
             generate_source(self)
         except Exception as exc:           # a function the printer does not know: one line naming it

@@ -183,7 +183,7 @@ def _compiled_integrands(system, q, lam, qs, qt, ls, lt, h, paper_sign, correcte
     system has no generated point functions (a duck-typed system: the numpy route is used)."""
     if not hasattr(system, "theta_expr"):
         return None
-    from integrators.engine import point_functions
+    from integrators.codegen import point_functions
     ev, _ = point_functions(system)
     d = q.shape[-1]
     flat = lambda x: np.ascontiguousarray(x.reshape(-1, d), dtype=float)

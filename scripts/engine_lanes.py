@@ -33,7 +33,8 @@ import numpy as np
 import integrators
 import invariants
 from integrators import kernel
-from integrators.engine import _lagrange_matrix, _load, point_functions, set_threads
+from integrators.codegen import _load, point_functions
+from integrators.engine import _lagrange_matrix, set_threads
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = [("GLRK2", "symmetric"), ("GLRK1", "none"), ("SRK3", "symmetric"), ("GLRK4", "symmetric"),

@@ -10,7 +10,8 @@ import pytest
 import sympy
 
 import integrators
-from integrators.engine import generate_source, point_functions, set_threads
+from integrators.codegen import generate_source, point_functions
+from integrators.engine import set_threads
 from integrators.projections import PROJECTIONS, admission
 
 from integrators import reference

@@ -14,7 +14,7 @@ def test_jacobian_matches_complex_step(sysname, h, tab, proj, rng):
     """The compiled kernel's exact Jacobian of the step equations, column by column against
     complex-step differences of its own residual (complex128 specialisation): to 1e-12."""
     from integrators import kernel
-    from integrators.engine import point_functions
+    from integrators.codegen import point_functions
     sy = integrators.system(sysname)
     eng = integrators.Engine(sy, integrators.tableau(tab), proj, h)
     ev_r, _ = point_functions(sy)

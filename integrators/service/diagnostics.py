@@ -88,7 +88,7 @@ class Diagnostics:
         if one is NaN).  One compiled pass over the points (the system's generated H, momentum and ϑ);
         for a double-double state (q, p of shape (n, d, 2)) H, the momentum and ϑ are evaluated in
         double-double and each difference is taken there before it is rounded to double."""
-        from ..engine import point_functions, scalar_function
+        from ..codegen import point_functions, scalar_function
         sc, sy = self.scene, self.system
         if np.ndim(q) == 3 or self.dd:         # (doubles in a double-double run: taken exactly)
             pairs = lambda x: x if np.ndim(x) == 3 else np.stack([x, np.zeros_like(x)], axis=-1)
@@ -217,7 +217,7 @@ def _params(system):
 
 def _scalars(system, q):
     """H and the momentum (0 without a symmetry) at every point, by the system's compiled function."""
-    from ..engine import scalar_function
+    from ..codegen import scalar_function
     q = np.ascontiguousarray(q, dtype=float)
     out = np.empty((q.shape[0], 2))
     _scalars_at(scalar_function(system), _params(system), q, out)

@@ -200,7 +200,7 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
 
     system = scene.system()
     error = None
-    from ..engine import CacheError, point_functions
+    from ..codegen import CacheError, point_functions
     try:                               # the engine's code for this system, compiled before any file is touched
         point_functions(system)
     except CacheError as exc:

@@ -1,0 +1,339 @@
+"""The system's compiled point functions: generated Python source from its symbolic ϑ and H, kept in
+an on-disk cache and compiled by numba once per machine.
+
+:func:`point_functions` gives the engine (integrators/engine.py) and the kernel
+(integrators/kernel.py) what they call for a system: ϑ, ϑ_q, ∇H and, for Jacobians, ϑ_qq and ∇²H
+at one point (or W points in lanes, or a complex-step point, or in double-double), with common
+subexpressions shared, and the domain test.  The source (:func:`generate_source`,
+:func:`generate_dd_source`) is written to ``$POINCARE_CACHE/kernels`` (or
+``$XDG_CACHE_HOME/poincare``, ``~/.cache/poincare``) under a key of the expressions
+(:func:`_key`), so MPI ranks and later runs share it; parameter values are runtime data.  Deleting
+the cache is always safe.  :class:`_Printer` is the one printer of generated code: the systems'
+numpy functions (integrators/systems.py) and the compiled ones print through it.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import itertools
+import os
+import sys
+from pathlib import Path
+
+from sympy.printing.numpy import NumPyPrinter
+
+CODEGEN_VERSION = "4"          # bump when the generated source changes shape
+DD_CODEGEN_VERSION = "3"       # ... and this when the double-double source does
+
+
+def cache_dir() -> Path:
+    """Where generated kernels and numba's compiled code are kept."""
+    root = os.environ.get("POINCARE_CACHE")
+    if root:
+        return Path(root)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "poincare"
+
+
+
+class _Printer(NumPyPrinter):
+    """numpy printer that prints every symbol by the safe name it was given.
+
+    The generated code never sees a user's names: coordinates become ``_q0, _q1, …``, parameters
+    ``_k0, _k1, …`` and common subexpressions ``_x0, …`` (sympy Dummies, so a user symbol
+    spelled ``_x0`` cannot be mistaken for one), and numpy is reached as ``numpy.…`` only.  So a
+    coordinate called ``q``, ``out`` or ``np``, or a parameter called ``e``, ``pi``, ``sqrt`` or
+    ``lambda``, means exactly that symbol.
+    """
+
+    def __init__(self, names):
+        super().__init__({"fully_qualified_modules": True, "allow_unknown_functions": False})
+        self.names = names
+
+    def _print_Symbol(self, expr):
+        try:
+            return self.names[expr]
+        except KeyError:
+            raise ValueError(f"no value for symbol '{expr}'") from None
+
+    _print_Dummy = _print_Symbol
+
+
+def _key(system) -> str:
+    """Hash of what the generated source depends on: coordinates, parameter order, ϑ, H, domain."""
+    import numba
+    import sympy
+    parts = [CODEGEN_VERSION, numba.__version__, sys.version.split()[0],
+             sympy.srepr(tuple(system.q)), sympy.srepr(tuple(system.params)),
+             sympy.srepr(tuple(system.theta_expr)), sympy.srepr(system.H_expr), sympy.srepr(tuple(system.domain_expr))]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
+
+
+class _EnginePrinter:
+    """The generated code's printer: :class:`integrators.systems._Printer` with integer powers written
+    as products (x**3 → x*x*x, x**-2 → 1.0/(x*x)), so the scalar and the W-lane functions do the same
+    IEEE operations (a lane's pow would be a per-lane library call)."""
+
+    _cls = None
+
+    @classmethod
+    def make(cls, names):
+        if cls._cls is None:
+            class Printer(_Printer):
+                def _print_Pow(self, expr, rational=False):
+                    b, e = expr.as_base_exp()
+                    if e.is_Integer and 0 < abs(int(e)) <= 64:
+                        base = f"({self._print(b)})"
+                        prod = "*".join([base] * abs(int(e)))
+                        return f"({prod})" if e > 0 else f"(1.0/({prod}))"
+                    return super()._print_Pow(expr, rational)
+            cls._cls = Printer
+        return cls._cls(names)
+
+
+class _DDPrinter:
+    """The double-double point functions' printer: :class:`_EnginePrinter` with every number that
+    is not a small integer written as the nearest double-double, ``_dd(hi, lo)``, from its exact
+    value at 50 digits (1/3, π, √2 and 1e-1 as the reals they are, not as doubles)."""
+
+    _cls = None
+
+    @classmethod
+    def make(cls, names):
+        if cls._cls is None:
+            import sympy
+
+            from .ddouble import split
+
+            class Printer(_EnginePrinter.make({}).__class__):
+                def _print(self, expr, **kwargs):
+                    if isinstance(expr, sympy.Basic) and expr.is_number and expr.is_real is not False:
+                        if expr.is_Integer and abs(int(expr)) < 2 ** 53:
+                            return f"{int(expr)}.0" if int(expr) >= 0 else f"({int(expr)}.0)"
+                        hi, lo = split(str(sympy.N(expr, 60)))
+                        return f"_dd({hi!r}, {lo!r})"
+                    return super()._print(expr, **kwargs)
+            cls._cls = Printer
+        return cls._cls(names)
+
+
+def _body(exprs, targets, qsyms, params, indent, known=(), printer=None):
+    """Lines ``st(array, index, exprs[i])`` for ``targets[i] = (array, index)``, with common
+    subexpressions shared; ``known``: (symbol, expression) pairs already assigned, reused here.
+    Returns the lines and the new (symbol, expression) pairs."""
+    import sympy
+    exprs = list(exprs)
+    for sym, e in known:
+        exprs = [x.xreplace({e: sym}) for x in exprs]
+    subs, reduced = sympy.cse(exprs, symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
+                              optimizations="basic")
+    names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
+    names.update({k: f"_k{i}" for i, k in enumerate(params)})
+    names.update({sym: f"_x{i}" for i, (sym, _) in enumerate(known)})
+    names.update({sym: f"_x{len(known) + i}" for i, (sym, _) in enumerate(subs)})
+    pr = (printer or _EnginePrinter).make(names)
+    pad = " " * indent
+    lines = [f"{pad}{names[sym]} = {pr.doprint(e)}" for sym, e in subs]
+    lines += [f"{pad}st({a}, {i}, {pr.doprint(e)})" for (a, i), e in zip(targets, reduced)]
+    return lines, list(known) + subs
+
+
+def generate_source(system) -> str:
+    """The Python source of a system's compiled point functions: ``evaluate_real``,
+    ``evaluate_complex`` (the same body, for the audit's complex-step derivatives),
+    ``evaluate_lanes`` (the same body on W = kernel.LANES interleaved points; None where a function
+    has no lane form) and ``inside``.  Made once per System object (a scene's validation and the
+    engine share it)."""
+    cached = getattr(system, "_generated_source", None)
+    if cached is None:
+        cached = _generate_source(system)
+        system._generated_source = cached
+    return cached
+
+
+def _point_body(system, printer=None):
+    """The lines of a point function's body: ϑ, ϑ_q, ∇H (``first``), then ϑ_qq, ∇²H (``second``,
+    under ``if _need:``).  ϑ, ϑ_q and ∇H come from the same lines whether or not the second
+    derivatives are asked for, so their bits never depend on it (a W-lane call computes them for
+    every lane when any lane asks)."""
+    d = system.d
+    q, params = system.q, list(system.params)
+    th = [(("_th", i), system.theta_expr[i]) for i in range(d)]
+    T = [(("_T", i * d + j), system.dtheta_expr[i][j]) for i in range(d) for j in range(d)]
+    dH = [(("_dH", i), system.dH_expr[i]) for i in range(d)]
+    TT = [(("_TT", (i * d + j) * d + l), system.ddtheta_expr[i][j][l])
+          for i in range(d) for j in range(d) for l in range(d)]
+    HH = [(("_HH", i * d + j), system.ddH_expr[i][j]) for i in range(d) for j in range(d)]
+    light, extra = th + T + dH, TT + HH
+    first, known = _body([e for _, e in light], [t for t, _ in light], q, params, 4, printer=printer)
+    second, _ = _body([e for _, e in extra], [t for t, _ in extra], q, params, 8, known, printer=printer)
+    return first, second
+
+
+def _generate_source(system) -> str:
+    from .kernel import LANES
+    d = system.d
+    q, params = system.q, list(system.params)
+    first, second = _point_body(system)
+    head = [f"    {a} = lanes({a}, 0, _P)" for a in ("_qin", "_th", "_T", "_TT", "_dH", "_HH")]
+    head += [f"    _q{i} = ld(_qin, {i})" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
+    body = head + first + ["    if _need:", *second, "        pass"]
+    lines = [f'"""Generated by integrators.engine for the system {system.name!r}; do not edit."""',
+             "import numpy", "from numba import cfunc, njit, types",
+             "from integrators.simd import lanes, ld, st", "", "_F = types.CPointer(types.float64)"]
+    for name, A, W in (("evaluate_real", "float64", 1), ("evaluate_complex", "complex128", 1),
+                       ("evaluate_lanes", "float64", LANES)):
+        lines += ["", f"_A = types.CPointer(types.{A})", f"_P = {(0,) * W!r}",
+                  f"def _{name}(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *body, ""]
+        sig = "types.void(_A, _F, types.boolean, _A, _A, _A, _A, _A)"
+        if W == 1:
+            lines += [f"{name} = cfunc({sig}, cache=True, error_model='numpy')(_{name})"]
+        else:
+            lines += ["try:", f"    {name} = cfunc({sig}, cache=True, error_model='numpy')(_{name})",
+                      "except Exception:     # a function without a lane form: the engine runs W = 1",
+                      f"    {name} = None"]
+    scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
+    lines += ["", "", "@cfunc(types.void(_F, _F, _F), cache=True, error_model='numpy')",
+              "def scalars(_qin, _k, _out):",
+              "    \"\"\"H and the Noether momentum (0 when the system has none) at one point.\"\"\""]
+    lines += [f"    _q{i} = _qin[{i}]" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
+    lines += _body_plain(scal, ["_out[0]", "_out[1]"], q, params, 4)
+    lines += ["", "", "@cfunc(types.boolean(_F, _F), cache=True, error_model='numpy')",
+              "def inside(_qin, _k):",
+              f"    for _i in range({d}):",
+              "        if not numpy.isfinite(_qin[_i]):",
+              "            return False"]
+    if system.domain_expr:
+        g = [(f"_g{i}", e) for i, e in enumerate(system.domain_expr)]
+        gl = _body_plain([e for _, e in g], [t for t, _ in g], q, params, 4)
+        lines += [f"    _q{i} = _qin[{i}]" for i in range(d)] + [f"    _k{i} = _k[{i}]" for i in range(len(params))]
+        lines += gl
+        lines += [f"    if not ({t} > 0):\n        return False" for t, _ in g]
+    lines += ["    return True", ""]
+    return "\n".join(lines)
+
+
+def generate_dd_source(system) -> str:
+    """The Python source of a system's double-double point function ``evaluate_dd`` (the
+    signature of ``evaluate_real`` on pointers to double-doubles; integrators/ddouble.py), its
+    constants exact to a double-double (:class:`_DDPrinter`), and ``lanes_dd()``, which compiles the
+    same body on W lanes of double-doubles.  A module of its own, made only when a double-double run
+    asks for it."""
+    from .kernel import LANES
+    d = system.d
+    q, params = system.q, list(system.params)
+    first, second = _point_body(system, _DDPrinter)
+    head = [f"    {a} = lanes({a}, 0, _P)" for a in ("_qin", "_th", "_T", "_TT", "_dH", "_HH")]
+    # the parameters as double-doubles (their doubles exactly): a product of two parameters must not
+    # round to double first
+    kdd = [f"    _k{i} = _dd(_k[{i}], 0.0)" for i in range(len(params))]
+    head += [f"    _q{i} = ld(_qin, {i})" for i in range(d)] + kdd
+    scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
+    sbody, _ = _body(scal, [("_out", 0), ("_out", 1)], q, params, 4, printer=_DDPrinter)
+    lines = [f'"""Generated by integrators.engine for the system {system.name!r} (double-double); do not edit."""',
+             "import numpy", "from numba import cfunc, types",
+             "from integrators.ddouble import dd as _dd, dd_t", "from integrators.simd import lanes, ld, st", "",
+             "_F = types.CPointer(types.float64)", "_A = types.CPointer(dd_t)", "_P = (0.0,)", "",
+             "def _evaluate_dd(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *head, *first, "    if _need:", *second,
+             "        pass", "",
+             "evaluate_dd = cfunc(types.void(_A, _F, types.boolean, _A, _A, _A, _A, _A), cache=True, "
+             "error_model='numpy')(_evaluate_dd)", "", "",
+             "def _scalars_dd(_qin, _k, _out):",
+             "    \"\"\"H and the Noether momentum (0 when the system has none) at one point, in double-double.\"\"\"",
+             "    _qin = lanes(_qin, 0, _P)", "    _out = lanes(_out, 0, _P)",
+             *[f"    _q{i} = ld(_qin, {i})" for i in range(d)], *kdd,
+             *sbody, "",
+             "scalars_dd = cfunc(types.void(_A, _F, _A), cache=True, error_model='numpy')(_scalars_dd)", ""]
+    # the same body on W = kernel.LANES double-doubles (integrators/simd.py's DDVec), made when a
+    # double-double run of at least W points asks for it (lanes_dd)
+    lines += ["", "def lanes_dd():", "    \"\"\"The W-lane double-double point function (compiled on first call).\"\"\"",
+              f"    _P = {(0.0,) * LANES!r}", "",
+              "    def _evaluate_dd_lanes(_qin, _k, _need, _th, _T, _TT, _dH, _HH):",
+              *["    " + x for x in head], *["    " + x for x in first], "        if _need:",
+              *["    " + x for x in second], "            pass", "",
+              "    return cfunc(types.void(_F, _F, types.boolean, _F, _F, _F, _F, _F), cache=True, "
+              "error_model='numpy')(_evaluate_dd_lanes)", ""]
+    return "\n".join(lines)
+
+
+def sympy_zero():
+    import sympy
+    return sympy.Float(0.0)
+
+
+def _body_plain(exprs, targets, qsyms, params, indent):
+    """Lines ``targets[i] = exprs[i]`` (scalar names), with common subexpressions shared."""
+    import sympy
+    subs, reduced = sympy.cse(list(exprs), symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
+                              optimizations="basic")
+    names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
+    names.update({k: f"_k{i}" for i, k in enumerate(params)})
+    names.update({sym: f"_x{i}" for i, (sym, _) in enumerate(subs)})
+    pr = _Printer(names)
+    pad = " " * indent
+    return [f"{pad}{names[sym]} = {pr.doprint(e)}" for sym, e in subs] + \
+        [f"{pad}{t} = {pr.doprint(e)}" for t, e in zip(targets, reduced)]
+
+
+_LOADED = {}
+
+
+class CacheError(ValueError):
+    """The engine's code cache ($POINCARE_CACHE) cannot be written: one line naming it."""
+
+
+def _load(system, precision="double"):
+    key = getattr(system, "_engine_key", None)
+    if key is None:
+        key = system._engine_key = _key(system)       # (sympy's srepr of every expression: once)
+    if precision != "double":
+        key = f"{key}_dd{DD_CODEGEN_VERSION}"
+    if key in _LOADED:
+        return _LOADED[key]
+    folder = cache_dir() / "kernels"
+    path = folder / f"system_{key}.py"
+    generate_source_ = generate_source if precision == "double" else generate_dd_source
+    if not path.exists():
+        tmp = folder / f".system_{key}.{os.getpid()}.tmp"
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp.write_text(generate_source_(system))
+            os.replace(tmp, path)           # atomic: MPI ranks generating together never see half a file
+        except OSError as exc:
+            where = "$POINCARE_CACHE" if os.environ.get("POINCARE_CACHE") else "the engine's cache"
+            raise CacheError(f"cannot write {where} '{folder}' ({exc.strerror or exc}): the generated code of "
+                             "each system is kept there; set POINCARE_CACHE to a folder you can write") from None
+    spec = importlib.util.spec_from_file_location(f"poincare_system_{key}", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod         # numba's cache finds a function's module by name
+    spec.loader.exec_module(mod)
+    _LOADED[key] = mod
+    return mod
+
+
+def scalar_function(system):
+    """The compiled ``scalars(q, k, out)`` of ``system``: out = [H(q), momentum(q) or 0]."""
+    return _load(system).scalars
+
+
+def point_functions(system, complex_step=False, lanes=False, precision="double"):
+    """The compiled (evaluate, inside) pair of ``system`` (generated and compiled once per machine):
+    the scalar real or complex-step evaluation, or with ``lanes`` the W-lane one (None where the
+    system has a function without a lane form); with ``precision="double-double"`` the scalar
+    double-double one (its own module, :func:`generate_dd_source`)."""
+    if precision == "double-double":
+        mod = _load(system, "double-double")
+        if not lanes:
+            return mod.evaluate_dd, _load(system).inside
+        if not hasattr(mod, "_lanes_dd"):
+            try:
+                mod._lanes_dd = mod.lanes_dd()
+            except Exception:       # a function without a lane form: the engine runs W = 1
+                mod._lanes_dd = None
+        return mod._lanes_dd, _load(system).inside
+    mod = _load(system)
+    ev = mod.evaluate_lanes if lanes else (mod.evaluate_complex if complex_step else mod.evaluate_real)
+    return ev, mod.inside
+
+
+# -- the state and the engine --------------------------------------------------------------------
