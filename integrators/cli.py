@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from .stop import GRACE, StopRequest, in_critical, in_user_code
+from .service.stop import GRACE, StopRequest, in_critical, in_user_code
 
 EXIT_OK, EXIT_NOT_OK, EXIT_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 
@@ -207,11 +207,11 @@ def _print_summary(summaries, out, n_outputs=None):
 
 
 def cmd_run(args) -> int:
-    from .. import __version__
-    from .driver import run
-    from .ranks import communicator
-    from .scene import load_scene
-    from .plugins import LOADED
+    from . import __version__
+    from .service.driver import run
+    from .service.ranks import communicator
+    from .service.scene import load_scene
+    from .service.plugins import LOADED
     LOADED.clear()                  # the summary lists the code this scene loads
     comm = communicator()
     scene = load_scene(args.scene)
@@ -223,11 +223,11 @@ def cmd_run(args) -> int:
             raise ValueError(f"--steps must be a positive integer, got {args.steps}")
         scene = scene.with_steps(args.steps)
     if args.threads is not None:
-        from ..engine import max_threads
+        from .engine import max_threads
         if not 1 <= args.threads <= max_threads():
             raise ValueError(f"--threads must be between 1 and {max_threads()} (the cores numba can use here), "
                              f"got {args.threads}")
-    from .ranks import default_threads
+    from .service.ranks import default_threads
     threads = args.threads or default_threads(comm)
     if comm.rank == 0:
         print(f"scene '{_printable(scene.name)}': {_printable(scene.system_name)}, {scene.n_points} points, {len(scene.pairs)} pairs, "
@@ -235,16 +235,16 @@ def cmd_run(args) -> int:
               f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
               flush=True)
         if scene.checkpoints == "per-rank":
-            from .output import state_dir
+            from .service.output import state_dir
             print(f"checkpoints: every rank writes its points' state into '{_printable(state_dir(out))}' "
                   "(keep that folder beside the file to resume it)", flush=True)
-        from ..engine import kernel_cached
+        from .engine import kernel_cached
         if not kernel_cached():
             print("compiling the step engine (once per machine: about 50 s on 2 cores, before the first pair; "
                   "the pairs' wall times below do not include it) ...", flush=True)
     note = None
     if comm.rank == 0 and len(scene.projections) > 1:      # the scene compares projections: can it?
-        from ..audit.discrimination import discrimination
+        from .audit.discrimination import discrimination
         system = scene.system()
         note = discrimination(system, scene.points(system), scene.h)
         if note:
@@ -284,7 +284,7 @@ def _energy_absolute_points(path) -> int:
 
 def _print_user_code():
     """Say which of the user's code the scene ran (README: a scene that names code runs it)."""
-    from .plugins import LOADED
+    from .service.plugins import LOADED
     if LOADED:
         print("the scene ran this Python code of yours (like a script):")
         for (what, spec), where in LOADED.items():
@@ -293,8 +293,8 @@ def _print_user_code():
 
 def cmd_audit(args) -> int:
     import json
-    from .. import audit
-    from .scene import load_scene
+    from . import audit
+    from .service.scene import load_scene
     scene = load_scene(args.scene)
     if args.steps is not None:
         if args.steps < 1:
@@ -347,8 +347,8 @@ def _check_writable(path, option, file):
 
 
 def cmd_scenes(args) -> int:
-    from . import scene as scene_module
-    from .scene import builtin_scenes, load_scene
+    from .service import scene as scene_module
+    from .service.scene import builtin_scenes, load_scene
     if args.keys:
         import re
         text = scene_module.__doc__.strip()
@@ -364,7 +364,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    from .plots import plot_file
+    from .service.plots import plot_file
     for path in plot_file(args.file, args.output):
         print(path)
     return 0
@@ -384,7 +384,7 @@ def cmd_list(args) -> int:
 def build_parser():
     ap = argparse.ArgumentParser(prog="poincare",
                                  description="Poincaré integral invariant diagnostics of projected variational integrators.")
-    from .. import __version__
+    from . import __version__
     ap.add_argument("--version", action="version", version=f"poincare {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scene (a built-in name or a TOML file; default: the 'default' scene)",
@@ -438,7 +438,7 @@ def build_parser():
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     rank = _rank()
-    from .output import OutputError
+    from .service.output import OutputError
 
     def say(msg):
         # input errors are the same on every rank: print them once; say which rank otherwise

@@ -17,7 +17,7 @@ PACKAGES = ("integrators", "invariants")
 LABEL = re.compile(r"\b((?:eq|sec|app|tab|fig):[A-Za-z_0-9]+)")
 
 
-LAYERS = (("integrators.service.cli", "cli"), ("integrators.service", "service"), ("integrators.audit", "audit"), ("integrators", "core"),
+LAYERS = (("integrators.cli", "cli"), ("integrators.service", "service"), ("integrators.audit", "audit"), ("integrators", "core"),
           ("invariants", "invariants"))
 ALLOWED = {"core": {"core"}, "invariants": {"core", "invariants"},   # (the compiled point functions)
            "service": {"core", "invariants", "service"},
@@ -68,6 +68,37 @@ def graph_of_source() -> dict:
 def violations(graph) -> list:
     """'a imports b' for every import that goes against the layers (ALLOWED)."""
     return [f"{m} imports {d}" for m, deps in graph.items() for d in deps if layer(d) not in ALLOWED[layer(m)]]
+
+
+def circles(graph) -> list:
+    """The import circles: every set of two or more modules that reach one another through imports
+    (Tarjan's strongly connected components), each as a sorted list."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
 
 
 def citations(name, tree):
@@ -139,10 +170,11 @@ def main():
              "where each equation or section of the paper that a docstring cites is implemented.", "",
              "Four layers: the numerical **core** (`integrators`: tableaus, systems, projections, the compiled "
              "kernel and its engine, `integrate`), **invariants** (`invariants`), the **service** "
-             "(`integrators.service`: scenes, ranks, driver, diagnostics, output, plots, plugins, CLI) and the "
-             "**audit** (`integrators.audit`), with the command line (`integrators.service.cli`) on top of "
+             "(`integrators.service`: scenes, ranks, driver, diagnostics, output, plots, plugins) and the "
+             "**audit** (`integrators.audit`), with the command line (`integrators.cli`) on top of "
              "both.  A layer imports only itself and the layers before it "
-             "(core and invariants import neither the service nor the audit); the script exits 1 when an "
+             "(core and invariants import neither the service nor the audit, the service not the audit), "
+             "and no modules import one another in a circle; the script exits 1 when an "
              "import breaks that, and `tests/test_architecture.py` runs the same check.", "",
              "## Import graph (within the two packages)", "",
              "| module | layer | imports |", "|---|---|---|"]
@@ -160,6 +192,10 @@ def main():
     bad = violations(graph)
     if bad:
         print("imports across layers the wrong way:", "; ".join(bad))
+        return 1
+    loops = circles(graph)
+    if loops:
+        print("import circles:", "; ".join(" ↔ ".join(c) for c in loops))
         return 1
     if args.paper:
         known = set(re.findall(r"\\label\{([^}]*)\}", Path(args.paper).read_text()))

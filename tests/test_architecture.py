@@ -25,6 +25,17 @@ def test_no_import_goes_against_the_layers():
     assert arch.violations(bad) == ["integrators.engine imports integrators.service.output"]
 
 
+def test_no_modules_import_one_another_in_a_circle():
+    """No import circle (engine ↔ systems was one: the generated code lives in integrators.codegen
+    now, its printer too); and the check fires on one."""
+    arch = _architecture()
+    graph = arch.graph_of_source()
+    assert arch.circles(graph) == []
+    assert "integrators.engine" not in graph["integrators.systems"]
+    looped = dict(graph, **{"integrators.codegen": graph["integrators.codegen"] + ["integrators.systems"]})
+    assert arch.circles(looped) == [["integrators.codegen", "integrators.systems"]]
+
+
 def test_importing_the_core_loads_neither_service_nor_audit():
     code = ("import sys, integrators, invariants; "
             "print(sorted(m for m in sys.modules if m.startswith(('integrators.service', 'integrators.audit', "
@@ -68,3 +79,38 @@ def test_every_package_the_code_imports_is_a_runtime_dependency_and_test_tools_a
     numba = next(d for d in project["dependencies"] if d.startswith("numba"))
     assert "<" in numba, numba
     assert project["dynamic"] == ["version"] and "version" not in project
+
+
+def test_no_code_branches_on_a_projection_name():
+    """The projections are the records of integrators/projections.py: no other module of the package
+    compares a projection variable with a projection's name or keys a table by the names (the
+    reference engine did, reading σ and the coupling off string tests)."""
+    import ast
+    from integrators.projections import PROJECTIONS
+    names = set(PROJECTIONS)
+
+    def strings(node):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            return {node.value}
+        if isinstance(node, (ast.Tuple, ast.Set, ast.List)):
+            return set().union(*(strings(e) for e in node.elts)) if node.elts else set()
+        return set()
+
+    def is_projection(node):
+        ident = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else ""
+        return "proj" in ident.lower()
+
+    found = []
+    for path in (ROOT / "integrators").rglob("*.py"):
+        if path.name == "projections.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Compare):
+                operands = [node.left, *node.comparators]
+                if any(strings(o) & names for o in operands) and any(is_projection(o) for o in operands):
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+            elif isinstance(node, ast.Dict):
+                keys = set().union(*(strings(k) for k in node.keys if k is not None)) if node.keys else set()
+                if len(keys & names) >= 2:
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert found == [], found

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from integrators.service import driver
-from integrators.service.cli import main as cli_main
+from integrators.cli import main as cli_main
 from integrators.service.scene import SceneError, parse_scene
 
 BIN = Path(sys.executable).parent
@@ -389,7 +389,7 @@ def test_a_file_another_run_is_writing_is_called_busy_not_damaged(tmp_path):
 def test_control_characters_in_names_are_refused_and_never_printed_raw(tmp_path):
     with pytest.raises(SceneError, match="control characters"):
         parse_scene(USER.replace('name = "osc"', 'name = "a\\u001b[31mred"'))
-    from integrators.service.cli import _printable
+    from integrators.cli import _printable
     assert _printable("a\x1b[31m\nb") == "a\\x1b[31m\\nb"
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from integrators.service import driver, output
-from integrators.service.cli import main as cli_main
+from integrators.cli import main as cli_main
 from integrators.service.scene import SceneError, parse_scene
 from test_edges import BIN, LV, USER, one_line, poincare
 

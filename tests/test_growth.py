@@ -84,7 +84,7 @@ def test_a_run_file_carries_the_laws_and_the_summary_shows_them(tmp_path, capsys
     growth_exponent; read_run exposes them; the summary prints the law beside the largest error;
     GLRK1-standard drifts linearly (exponent 1 ± 0.1), GLRK2-symmetric stays at round-off."""
     from integrators.service import read_run
-    from integrators.service.cli import main as cli_main
+    from integrators.cli import main as cli_main
     out = tmp_path / "run.h5"
     code = cli_main(["run", "default", "-o", str(out), "-q"])
     assert code == 0

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from integrators.service import driver
-from integrators.service.cli import main as cli_main
+from integrators.cli import main as cli_main
 from integrators.service.scene import SceneError, builtin_scenes, load_scene, parse_scene
 
 SMALL = """

@@ -37,7 +37,7 @@ def test_a_tableau_file_holding_code_runs_nothing(tmp_path, monkeypatch, text):
 
 
 def test_the_audit_cli_refuses_a_code_tableau_in_one_line(tmp_path, monkeypatch, capsys):
-    from integrators.service.cli import main
+    from integrators.cli import main
     monkeypatch.chdir(tmp_path)
     f = tmp_path / "evil.toml"
     f.write_text('a = [["__import__(\'os\').system(\'touch PWNED\')"]]\nb = [1]\nc = [0.5]\n')
@@ -131,7 +131,7 @@ def test_system_from_reads_strings_with_the_restricted_parser(tmp_path, monkeypa
 # -- the service: statuses, exit codes, batch safety ---------------------------------------------------
 
 from integrators.service import driver, output  # noqa: E402
-from integrators.service.cli import main as cli_main  # noqa: E402
+from integrators.cli import main as cli_main  # noqa: E402
 from integrators.service.scene import SceneError, load_scene, parse_scene  # noqa: E402
 
 POINTS = Path(__file__).parent

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from integrators.service import read_run
-from integrators.service.cli import main as cli_main
+from integrators.cli import main as cli_main
 from integrators.service.output import DamagedFile
 from integrators.service.scene import SceneError, parse_scene
 

@@ -7,7 +7,7 @@ raises between the engine's calls.  Two places never reach such a call by themse
 
 * **the user's code** (a step map, a shape, a system function: :func:`guarded` wraps each as it is
   loaded): while it runs, :func:`in_user_code` is true and the handler raises at once, so a map that
-  sleeps or spins is interrupted where it is (integrators.service.cli);
+  sleeps or spins is interrupted where it is (integrators.cli);
 * **a blocking call** that does not return (an MPI receive waiting for a rank stuck in user code,
   user code stuck in C): the CLI's watchdog ends the process :data:`GRACE` seconds after the signal
   if the run has not stopped by then, never inside :func:`critical` (a write to the file), so the
@@ -29,7 +29,7 @@ _lock = threading.Lock()
 
 class StopRequest:
     """A request to stop a run, passed in (``run(..., stop=...)``): ``set(exc)`` leaves an exception
-    (a signal handler does, integrators.service.cli), which the run raises before its next engine
+    (a signal handler does, integrators.cli), which the run raises before its next engine
     call; calling the request raises it.  Raising in the handler itself would land wherever Python
     happens to be, including inside h5py's destructors, where it is swallowed."""
 
