@@ -3,13 +3,17 @@
 The same equations as the compiled engine (integrators/projections.py, eq:vprk_1–eq:vprk_3,
 eq:vprk_lobatto and each projection's eq:…_pre / eq:…_post), written plainly with batched numpy
 arrays: Newton with a per-point convergence mask and inverse Jacobians carried across steps, the
-projections as string branches.  It ran every pair before the compiled engine; now it is
+projections read from the same records as the kernel's (:func:`integrators.projections.projection_record`:
+where ϑ_q is taken, σ, what is solved together; no branch on a projection's name).  It ran every
+pair before the compiled engine; now it is
 
-* the oracle of the compiled engine (tests/test_engine.py: 16 ulps after one step on every
-  admissible pair of three systems, the same breakdowns, long runs that track each other);
-* the extended-precision engine of the studies: on long double arrays it converges Newton to
-  4 eps of long double (its Jacobian inverted in double, since LAPACK has no long double), for
-  scripts/convergence.py --extended and scripts/energy_drift.py;
+* **the tests' independent oracle** of the compiled engine (tests/test_engine.py: 16 ulps after
+  one step on every admissible pair of three systems, the same breakdowns, long runs that track
+  each other) — a second statement of the equations in another language of arrays;
+* the engine of the long-double studies kept in the docs (scripts/convergence.py --extended,
+  scripts/energy_drift.py): on long double arrays it converges Newton to 4 eps of long double.
+  New studies below double use the compiled engine in double-double (docs/engine.md: the
+  long-double path is retired as a precision);
 * the stopping-rule experiment's engine (``Stepper(accept_unconverged=True)``,
   scripts/breakdown_sensitivity.py) and the "before" column of scripts/benchmark_core.py.
 
@@ -28,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from integrators.engine import _lagrange_matrix
-from integrators.projections import admission
+from integrators.projections import PROJECTIONS, admission, projection_record  # noqa: F401 (PROJECTIONS: the names)
 
 
 
@@ -185,12 +189,10 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
     Newton's method with the exact Jacobian, kept while it works: the Jacobian is evaluated
     and inverted at the first iteration (unless the caller hands in an inverse from the last
     step, ``jinv``/``known``) and again for any point whose update shrank by less than the
-    factor ``refresh`` in its last iteration.  Between refreshes an iteration costs one
+    factor ``refresh`` in its last iteration (default: the compiled kernel's ``REFRESH``, 0.01,
+    so that the oracle takes the kernel's path).  Between refreshes an iteration costs one
     residual evaluation and a matrix–vector product.  Every decision is per point, so a
-    point's iterates never depend on the rest of the batch.  ``refresh = 0.03`` (rather than
-    0.25) halves the cost of a Lotka–Volterra step, where a carried Jacobian often contracts by
-    only 0.1–0.2 per iteration (13.5 → 5.7 iterations per step), and changes nothing measurable
-    for the guiding centre (docs/benchmarks.md, history item 6).
+    point's iterates never depend on the rest of the batch.
 
     Parameters
     ----------
@@ -291,7 +293,6 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
 
 
 # --- the step ---
-PROJECTIONS = ('none', 'standard', 'symmetric', 'symplectic', 'midpoint')
 
 def _apply_rows(E, Y):
     """Σ_j E_ij Y[:, j]: E (s, m), Y (n, m, d) -> (n, s, d); explicit loop (batch-independent bits)."""
@@ -325,8 +326,9 @@ class Stepper:
             raise ValueError(why)
         self.system, self.tableau, self.projection, self.h = system, tableau, projection, float(h)
         self.accept_unconverged, self.unconverged = accept_unconverged, 0
-        self.sigma = 1.0 if projection == "standard" else float(np.sign(tableau.R_inf))
-        self.coupled = projection in ("symmetric", "midpoint")
+        self.record = rec = projection_record(projection)      # the paper's table row, as the kernel reads it
+        self.sigma = rec.sigma(tableau)
+        self.coupled = rec.coupled
         self.lobatto = tableau.d is not None
         s, d = tableau.s, system.d
         self.s, self.d = s, d
@@ -362,15 +364,15 @@ class Stepper:
         """
         sysm, tab, h, sig = self.system, self.tableau, self.h, self.sigma
         s, d = self.s, self.d
-        proj = self.projection
-        if proj == "none":
+        rec = self.record
+        if not rec.post:                         # unprojected: the method's own p_n
             qbar, pbar = q, p
-        elif proj == "symplectic":
+        elif rec.pre == "previous":              # the last step's Λ_n first (eq:symplectic_projection_pre)
             qbar = q + Lam
             pbar = sysm.theta(q) + transpose_apply(sysm.dtheta(q), Lam)
-        else:
+        else:                                    # on the constraint p_n = ϑ(q_n)
             qbar, pbar = q, sysm.theta(q)
-        Theta_q = sysm.dtheta(q) if proj == "symmetric" else None
+        Theta_q = sysm.dtheta(q) if rec.coupled and rec.pre_at == "start" else None
 
         sd = s * d
         iL = sd if self.coupled else None
@@ -390,9 +392,9 @@ class Stepper:
             if self.coupled:
                 q0 = q0 + L
                 sumbY = weigh(tab.b, tab.b_lo, Y)
-                if proj == "symmetric":
+                if rec.pre_at == "start":
                     Tx = Theta_q[idx]
-                else:  # midpoint: ϑ_q at the unprojected midpoint
+                else:  # ϑ_q at the unprojected midpoint
                     M = q0 + 0.5 * sumbY
                     Tx = sysm.dtheta(M)
                 pb = pb + transpose_apply(Tx, L)
@@ -402,7 +404,7 @@ class Stepper:
             if self.coupled:
                 q1 = q0 + sumbY + sig * L
                 T1 = sysm.dtheta(q1)
-                Tp = T1 if proj == "symmetric" else Tx
+                Tp = T1 if rec.post_at == "end" else Tx
                 p1 = pb + sumbG + sig * transpose_apply(Tp, L)
                 res.append(p1 - sysm.theta(q1))
                 # what the step needs at this iterate: q increment (perturbation, Ψ_h, projection), p_{n+1}
@@ -416,7 +418,7 @@ class Stepper:
                 return r, None, extras
 
             J = np.zeros((m, self.nz, self.nz), dtype=z.dtype)
-            Sx = contract_first(sysm.ddtheta(M), L) if proj == "midpoint" else None
+            Sx = contract_first(sysm.ddtheta(M), L) if self.coupled and rec.pre_at == "midpoint" else None
             blocks = stage_jacobian_blocks(tab, st)
             for i in range(s):
                 for j in range(s):
@@ -430,7 +432,7 @@ class Stepper:
                 shift = stage_jacobian_shift(tab, st)
                 for i in range(s):
                     J[:, i * d:(i + 1) * d, iL:iL + d] = shift[i] - dpb_dL
-                if proj == "symmetric":
+                if rec.post_at == "end":
                     S1 = contract_first(sysm.ddtheta(q1), L)
                     dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (1.0 + sig) * S1
                     extra_Y = sig * S1
@@ -477,7 +479,7 @@ class Stepper:
         """
         sig = self.sigma
         s, d = self.s, self.d
-        proj = self.projection
+        rec = self.record
         n = q.shape[0]
         sd = s * d
         iL = sd if self.coupled else None
@@ -503,7 +505,7 @@ class Stepper:
         Y, L, mu = unpack(z)
         out = StepResult()
         out.Y, out.mu, out.iterations, out.jinv = Y, mu, its, jinv
-        if proj == "none":
+        if not rec.post:
             out.inc_q, out.inc_p, out.p, out.Lam = ex["sumbY"], ex["sumbG"], None, np.zeros_like(q)
         elif self.coupled:
             out.inc_q, out.p, out.inc_p, out.Lam = ex["inc_q"], ex["p"], None, L
@@ -513,7 +515,7 @@ class Stepper:
             ok &= ok1
             out.iterations = its + its1
             out.p = ex1["p"]
-            out.inc_q = (sumbY + sig * L1) if proj == "standard" else ((Lam + sumbY) + sig * L1)
+            out.inc_q = (sumbY + sig * L1) if rec.pre == "none" else ((Lam + sumbY) + sig * L1)
             out.inc_p, out.Lam = None, L1
         if self.accept_unconverged:
             finite = np.all(np.isfinite(z), axis=1)

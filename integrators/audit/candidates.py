@@ -86,9 +86,12 @@ def candidates_from(spec: str, projections=None, what="candidate") -> list[Candi
 
 
 def pair_candidate(tab, projection) -> Candidate:
-    """A built-in or file tableau with a projection.  Only 'none' reads p_n (the projected maps
-    start from p_n = ϑ(q_n)) and only 'symplectic' reads λ_n (the others take it as a guess)."""
-    reads = {"none": {"p"}, "symplectic": {"lam"}}.get(projection, set())
+    """A built-in or file tableau with a projection.  Only an unprojected map reads p_n (the projected
+    maps start from p_n = ϑ(q_n)) and only one whose perturbation is the last step's Λ_n (the
+    symplectic projection) reads λ_n (the others take it as a guess): read off the projection's record."""
+    from ..projections import projection_record
+    rec = projection_record(projection)
+    reads = ({"p"} if not rec.post else set()) | ({"lam"} if rec.pre == "previous" else set())
     from ..service.output import pair_name
     return Candidate(pair_name(tab.name, projection), stepper_map(tab, projection), "pair", tab, projection, reads)
 
