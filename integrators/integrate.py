@@ -13,7 +13,8 @@ from typing import Callable
 
 import numpy as np
 
-from .engine import BLOCK, Engine, march
+from .ddouble import divide_array
+from .engine import BLOCK, PRECISIONS, Engine, march
 from .tableaus import Tableau, tableau as builtin_tableau
 
 
@@ -67,6 +68,37 @@ def _as_points(q0, d, what):
     return q0
 
 
+def _checked_steps(system, h, steps, save_every):
+    """(h, steps, save_every) as numbers the run can take (h: the system's default if None)."""
+    if h is None:
+        h = system.defaults.get("h")
+        if h is None:
+            raise ValueError("h not given and the system has no default")
+    h = float(h)
+    if not math.isfinite(h) or h == 0.0:
+        raise ValueError(f"h must be finite and non-zero, got {h}")
+    if int(steps) != steps or steps < 0:
+        raise ValueError(f"steps must be a non-negative integer, got {steps}")
+    if int(save_every) != save_every or save_every < 1:
+        raise ValueError(f"save_every must be a positive integer, got {save_every}")
+    return h, int(steps), int(save_every)
+
+
+def _checked_points(system, q0, p0, lam0):
+    """(q0 as (n, d), the set's leading shape, p0 as (n, d) or None for ϑ(q0), λ0 as (n, d)); every
+    initial point finite and inside the domain."""
+    q0 = _as_points(q0, system.d, "q0")
+    lead = q0.shape[:-1]                    # a loop (N,) or a surface (nσ, nτ): the set's shape travels along
+    q0 = q0.reshape(-1, system.d)
+    bad = ~system.in_domain(q0)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"initial point {k} = {q0[k].tolist()} is not finite or outside the domain of {system.name}")
+    p0 = None if p0 is None else _as_points(p0, system.d, "p0").reshape(q0.shape)
+    lam0 = np.zeros_like(q0) if lam0 is None else _as_points(lam0, system.d, "lam0").reshape(q0.shape)
+    return q0, lead, p0, lam0
+
+
 def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps=100, save_every=1,
               p0=None, lam0=None, t0=0.0, progress: Callable[[int, int], None] | None = None,
               chunk: int | None = None, precision: str = "double") -> Solution:
@@ -87,7 +119,7 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     progress : optional callback(step, steps)
     chunk : points per block of the engine's thread loop (results are bitwise the same for any)
     precision : ``"double"`` or ``"double-double"``: the same kernel on double-double numbers
-        (about 32 digits; integrators/ddouble.py), one point at a time, Newton to a few
+        (about 32 digits; integrators/ddouble.py), in lanes as double is, Newton to a few
         double-double ulps; q0, p0, lam0 are taken exactly as doubles, p0 defaults to ϑ(q0) in
         double-double, and every state comes back as two arrays whose exact sum is the result
         (``q`` and ``q_lo``, ``p`` and ``p_lo``, ``lam`` and ``lam_lo``).
@@ -97,31 +129,12 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     Solution
     """
     tab = tableau if isinstance(tableau, Tableau) else builtin_tableau(tableau)
-    if h is None:
-        h = system.defaults.get("h")
-        if h is None:
-            raise ValueError("h not given and the system has no default")
-    h = float(h)
-    if not math.isfinite(h) or h == 0.0:
-        raise ValueError(f"h must be finite and non-zero, got {h}")
-    if int(steps) != steps or steps < 0:
-        raise ValueError(f"steps must be a non-negative integer, got {steps}")
-    if int(save_every) != save_every or save_every < 1:
-        raise ValueError(f"save_every must be a positive integer, got {save_every}")
-    steps, save_every = int(steps), int(save_every)
-    q0 = _as_points(q0, system.d, "q0")
-    lead = q0.shape[:-1]                    # a loop (N,) or a surface (nσ, nτ): the set's shape travels along
-    q0 = q0.reshape(-1, system.d)
-    bad = ~system.in_domain(q0)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"initial point {k} = {q0[k].tolist()} is not finite or outside the domain of {system.name}")
-    p_given = p0
-    p0 = system.theta(q0) if p0 is None else _as_points(p0, system.d, "p0").reshape(q0.shape)
-    lam0 = np.zeros_like(q0) if lam0 is None else _as_points(lam0, system.d, "lam0").reshape(q0.shape)
-    if precision not in ("double", "double-double"):
+    h, steps, save_every = _checked_steps(system, h, steps, save_every)
+    q0, lead, p0, lam0 = _checked_points(system, q0, p0, lam0)
+    if precision not in PRECISIONS:
         raise ValueError(f"precision must be 'double' or 'double-double', got {precision!r}")
-    engine = Engine(system, tab, projection, h)
+    engine = Engine(system, tab, projection, h, precision=precision)
+    state = engine.state(q0, p0, lam0)         # (double-double: the doubles taken exactly, ϑ(q0) in double-double)
     n = q0.shape[0]
     nsave = steps // save_every + 1
     out_t = t0 + h * save_every * np.arange(nsave)
@@ -129,22 +142,11 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     out_q = np.empty((nsave, n, system.d) + ((2,) if dd else ()))
     out_p = np.empty_like(out_q)
     out_l = np.empty_like(out_q)
-    if dd:
-        from .ddouble import divide_array
-        from .engine import State, theta_dd
-        q2 = np.stack([q0, np.zeros_like(q0)], axis=-1)
-        p2 = theta_dd(system, q2) if p_given is None else np.stack([p0, np.zeros_like(p0)], axis=-1)
-        state = State.double_double(q2, p2, np.stack([lam0, np.zeros_like(lam0)], axis=-1), h, tab.s)
 
-        def record(step):
-            k = step // save_every
-            out_q[k], out_p[k], out_l[k] = state.q, state.p, divide_array(state.Lam, h)
-    else:
-        state = engine.state(q0, p0, lam0)
-
-        def record(step):
-            k = step // save_every
-            out_q[k], out_p[k], out_l[k] = state.q, state.p, state.Lam / h
+    def record(step):
+        k = step // save_every
+        out_q[k], out_p[k] = state.q, state.p
+        out_l[k] = divide_array(state.Lam, h) if dd else state.Lam / h
 
     record(0)
     march(engine, state, 0, steps, save_every, on_output=record, t0=t0,

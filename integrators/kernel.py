@@ -537,6 +537,61 @@ def _post(z, jac, r, J, ev, k, sig, d, w, S):
                 st(J, m * d + n, sig * (ld(T1, n * d + m) - ld(T1, m * d + n)) + (sig * sig) * ld(S1, m * d + n))
 
 
+@njit(inline='always', **_OPTS)
+def _keep_factors(LU, piv, Jt, pivt, stale, nz):
+    """The fresh factors Jt, pivt (every lane's) into LU, piv for the lanes that asked (``stale``)."""
+    for i in range(nz * nz):
+        st(LU, i, sel(stale, ld(Jt, i), ld(LU, i)))
+    for l in range(nlanes(LU)):
+        if lmask(stale, l):
+            for i in range(nz):
+                lset(piv, i, l, lget(pivt, i, l))
+
+
+@njit(inline='always', **_OPTS)
+def _update(z, r, done, scale, nz, f, F):
+    """z −= δ (r holds −δ) in the lanes not done; per lane the update's size max |δ|/scale
+    (``F.norm``), whether it was NaN and whether the new z is finite."""
+    size = sel(done, 0.0, 0.0)
+    nan = done
+    finite = mnot(done)
+    for i in range(nz):
+        ri = ld(r, i)
+        zi = ld(z, i) - ri
+        st(z, i, sel(done, ld(z, i), zi))
+        v = step_measure(ri, ld(scale, i), COMPLEX_STEP)
+        nan = mor(nan, v != v)
+        size = sel(v > size, v, size)
+        finite = mand(finite, np.isfinite(zi))
+    st(f, F.norm, size)
+    st(f, F.nan, sel(nan, 1.0, 0.0))
+    st(f, F.finite, sel(finite, 1.0, 0.0))
+
+
+@njit(inline='always', **_OPTS)
+def _judge(f, F, tol, stall, refresh):
+    """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol,
+    or ≤ stall once the update stops halving) or on, with a fresh Jacobian next time if this
+    iteration contracted by less than ``refresh``."""
+    for l in range(nlanes(f)):
+        if lget(f, F.done, l) != 0.0:
+            continue
+        its = lget(f, F.its, l) + 1.0
+        lset(f, F.its, l, its)
+        sz = lget(f, F.norm, l)
+        prev = lget(f, F.prev, l)
+        if lget(f, F.nan, l) != 0.0 or lget(f, F.finite, l) == 0.0 or not np.isfinite(sz):
+            lset(f, F.done, l, 1.0)
+            continue
+        theta = sz / prev if np.isfinite(prev) else np.inf
+        if (sz <= tol) or (sz <= stall and np.isfinite(theta) and theta > 0.5):
+            lset(f, F.done, l, 1.0)
+            lset(f, F.ok, l, 1.0)
+            continue
+        lset(f, F.stale, l, 1.0 if np.isfinite(theta) and theta > refresh else 0.0)
+        lset(f, F.prev, l, sz)
+
+
 @njit(**_OPTS)
 def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP, cfg):
     """Newton's method with the exact Jacobian, kept while it contracts, for every active lane.
@@ -582,45 +637,10 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
         if jac:
             lu_factor(Jx, pivx, nz)
             if W > 1:                             # every lane factorised, the lanes that asked keep theirs
-                for i in range(nz * nz):
-                    st(LU, i, sel(stale, ld(Jt, i), ld(LU, i)))
-                for l in range(W):
-                    if lmask(stale, l):
-                        for i in range(nz):
-                            lset(piv, i, l, lget(pivt, i, l))
+                _keep_factors(LU, piv, Jt, pivt, stale, nz)
         lu_solve(LU, piv, r, nz)                  # r is now −δ
-        size = sel(done, 0.0, 0.0)
-        nan = done
-        finite = mnot(done)
-        for i in range(nz):
-            ri = ld(r, i)
-            zi = ld(z, i) - ri
-            st(z, i, sel(done, ld(z, i), zi))
-            v = step_measure(ri, ld(scale, i), COMPLEX_STEP)
-            nan = mor(nan, v != v)
-            size = sel(v > size, v, size)
-            finite = mand(finite, np.isfinite(zi))
-        st(f, F.norm, size)
-        st(f, F.nan, sel(nan, 1.0, 0.0))
-        st(f, F.finite, sel(finite, 1.0, 0.0))
-        stall = cfg.stall_complex if is_complex(z) else cfg.stall
-        for l in range(W):
-            if lget(f, F.done, l) != 0.0:
-                continue
-            its = lget(f, F.its, l) + 1.0
-            lset(f, F.its, l, its)
-            sz = lget(f, F.norm, l)
-            prev = lget(f, F.prev, l)
-            if lget(f, F.nan, l) != 0.0 or lget(f, F.finite, l) == 0.0 or not np.isfinite(sz):
-                lset(f, F.done, l, 1.0)
-                continue
-            theta = sz / prev if np.isfinite(prev) else np.inf
-            if (sz <= tol) or (sz <= stall and np.isfinite(theta) and theta > 0.5):
-                lset(f, F.done, l, 1.0)
-                lset(f, F.ok, l, 1.0)
-                continue
-            lset(f, F.stale, l, 1.0 if np.isfinite(theta) and theta > refresh else 0.0)
-            lset(f, F.prev, l, sz)
+        _update(z, r, done, scale, nz, f, F)
+        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh)
     for l in range(W):                            # lanes out of iterations
         if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)
@@ -697,12 +717,11 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
     """One step of the lanes ``f.active`` from the stage guess (and μ guess), starting from the kept
     Newton factors in the lanes ``known``; commits the new state of each lane that succeeds.  Per
     lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
-    W = nlanes(w)
     sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
     iL = sd
     iM = sd + d if coupled else sd
-    q, p, lam, qc, pc = at(w, S.q), at(w, S.p), at(w, S.lam), at(w, S.qc), at(w, S.pc)
+    q, lam = at(w, S.q), at(w, S.lam)
     qbar, pbar, sY, sG, p1 = at(w, S.qbar), at(w, S.pbar), at(w, S.sY), at(w, S.sG), at(w, S.p1)
     z, zev, r = at(w, S.z), at(w, S.zev), at(w, S.r)
     _prepare(ev, k, plan, d, w, S)
@@ -752,8 +771,20 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
             st(ln, m, 0.0)
     active = ld(f, F.active) != 0.0
     st(f, F.itn, ld(f, F.itn) + sel(active, its, 0.0))
-    qn, qcn, pcn = at(w, S.qn), at(w, S.qcn), at(w, S.pcn)
-    for m in range(d):                          # compensated summation of the increments
+    _sum_increments(plan, d, w, S)
+    for m in range(d):
+        ok = mand(ok, mand(np.isfinite(ld(pn, m)), np.isfinite(ld(ln, m))))
+    st(f, F.okstep, sel(mand(active, ok), 1.0, 0.0))
+    _commit(inside, k, plan, d, s, iM, w, S, f, F, qr)
+
+
+@njit(inline='always', **_OPTS)
+def _sum_increments(plan, d, w, S):
+    """q_{n+1} = q_n + inc (and, unprojected, p_{n+1} = p_n + Σ b_i G_i) by compensated summation into
+    qn, qcn (pn, pcn); a projected step's pn is already p_{n+1} and keeps its compensation term."""
+    q, p, qc, pc, sG = at(w, S.q), at(w, S.p), at(w, S.qc), at(w, S.pc), at(w, S.sG)
+    inc, pn, qn, qcn, pcn = at(w, S.inc), at(w, S.pn), at(w, S.qn), at(w, S.qcn), at(w, S.pcn)
+    for m in range(d):
         y = ld(inc, m) + ld(qc, m)
         t = ld(q, m) + y
         st(qcn, m, y - (t - ld(q, m)))
@@ -765,10 +796,15 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
             t = ld(p, m) + y
             st(pcn, m, y - (t - ld(p, m)))
             st(pn, m, t)
-    for m in range(d):
-        ok = mand(ok, mand(np.isfinite(ld(pn, m)), np.isfinite(ld(ln, m))))
-    st(f, F.okstep, sel(mand(active, ok), 1.0, 0.0))
-    for l in range(W):
+
+
+@njit(inline='always', **_OPTS)
+def _commit(inside, k, plan, d, s, iM, w, S, f, F, qr):
+    """The lanes whose step succeeded (``f.okstep``) and whose q_{n+1} lies in the domain take the new
+    state (q, p, Λ, compensation terms, the stages and μ for the next guess); the others keep theirs."""
+    q, p, lam, qc, pc = at(w, S.q), at(w, S.p), at(w, S.lam), at(w, S.qc), at(w, S.pc)
+    qn, qcn, pn, pcn, ln, zev = at(w, S.qn), at(w, S.qcn), at(w, S.pn), at(w, S.pcn), at(w, S.ln), at(w, S.zev)
+    for l in range(nlanes(w)):
         if lget(f, F.okstep, l) != 0.0:
             for m in range(d):
                 qr[m] = re(lget(qn, m, l))
@@ -785,7 +821,7 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
             st(lam, m, sel(commit, ld(ln, m), ld(lam, m)))
             if plan.lobatto:
                 st(mus, m, sel(commit, ld(zev, iM + m), ld(mus, m)))
-        for i in range(sd):
+        for i in range(s * d):
             st(Ys, i, sel(commit, ld(zev, i), ld(Ys, i)))
 
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from integrators.engine import _lagrange_matrix
-from integrators.projections import PROJECTIONS, admission, projection_record  # noqa: F401 (PROJECTIONS: the names)
+from integrators.projections import admission, projection_record
 
 
 
@@ -232,20 +232,10 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
     converged = np.zeros(n, dtype=bool)
     iterations = np.zeros(n, dtype=np.int64)
     previous = np.full(n, np.inf)
-    if jinv is None:
-        Jinv = np.empty((n, nz, nz), dtype=z.dtype)
-        stale = np.ones(n, dtype=bool)       # needs a fresh Jacobian
-    else:
-        Jinv = jinv
-        stale = np.ones(n, dtype=bool) if known is None else ~known
+    Jinv = np.empty((n, nz, nz), dtype=z.dtype) if jinv is None else jinv
+    stale = np.ones(n, dtype=bool) if jinv is None or known is None else ~known   # needs a fresh Jacobian
     z_eval = z.copy()
     extras = {}
-
-    def keep(rows, ex):
-        for key, val in ex.items():
-            if key not in extras:
-                extras[key] = np.full((n,) + val.shape[1:], np.nan, dtype=val.dtype)
-            extras[key][rows] = val
     active = np.arange(n)
     for _ in range(maxiter):
         if active.size == 0:
@@ -253,43 +243,62 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
         everyone = active.size == n          # plain views instead of gathers while all iterate
         sel = slice(None) if everyone else active
         za = z[sel]
-        fresh = stale[sel]
         z_eval[sel] = za
-        if fresh.all():
-            r, J, ex = fun(active, za, True)
-            keep(sel, ex)
-            if everyone:
-                Jinv[...] = invert_batched(J)
-            else:
-                Jinv[active] = invert_batched(J)
-        else:
-            r = np.empty_like(za)
-            if fresh.any():
-                r[fresh], J, ex = fun(active[fresh], za[fresh], True)
-                keep(active[fresh], ex)
-                Jinv[active[fresh]] = invert_batched(J)
-            r[~fresh], _, ex = fun(active[~fresh], za[~fresh], False)
-            keep(active[~fresh], ex)
+        r = _residual_and_inverse(fun, active, sel, za, stale[sel], Jinv, extras, n)
         delta = -apply_batched(Jinv[sel], r)
         za = za + delta
         z[sel] = za
         iterations[sel] += 1
-        size = np.max(np.abs(delta.real) / scale[sel], axis=1)
-        if complex_step:       # the derivative (imaginary part) must converge too, to its own scale
-            size = np.maximum(size, np.max(np.abs(delta.imag) / (COMPLEX_STEP * scale[sel]), axis=1))
-        prev = previous[sel]
-        bad = ~np.isfinite(size) | ~np.all(np.isfinite(za), axis=1)
-        with np.errstate(invalid="ignore"):
-            theta = np.where(np.isfinite(prev), size / prev, np.inf)   # contraction; unknown at first
-        # converged: the update is below tol, or a round-off floor is reached.  (Stopping on the
-        # error predicted from the contraction, θ/(1 − θ)·|δ|, left constraint errors of 1e-12.)
-        done = (size <= tol) | ((size <= stall) & np.isfinite(theta) & (theta > 0.5))
-        done &= ~bad
+        size, theta, done, bad = _progress(delta, za, scale[sel], previous[sel], tol, stall, complex_step)
         stale[sel] = np.isfinite(theta) & (theta > refresh)
         previous[sel] = size
         converged[active[done]] = True
         active = active[~(done | bad)]
     return z_eval, converged, iterations, extras
+
+
+def _progress(delta, za, scale, prev, tol, stall, complex_step):
+    """(size of the update relative to scale, contraction θ against the last, converged, failed)
+    per row.  Converged: the update is below tol, or a round-off floor is reached (below stall and
+    no longer halving).  (Stopping on the error predicted from the contraction, θ/(1 − θ)·|δ|, left
+    constraint errors of 1e-12.)"""
+    size = np.max(np.abs(delta.real) / scale, axis=1)
+    if complex_step:       # the derivative (imaginary part) must converge too, to its own scale
+        size = np.maximum(size, np.max(np.abs(delta.imag) / (COMPLEX_STEP * scale), axis=1))
+    bad = ~np.isfinite(size) | ~np.all(np.isfinite(za), axis=1)
+    with np.errstate(invalid="ignore"):
+        theta = np.where(np.isfinite(prev), size / prev, np.inf)   # contraction; unknown at first
+    done = ((size <= tol) | ((size <= stall) & np.isfinite(theta) & (theta > 0.5))) & ~bad
+    return size, theta, done, bad
+
+
+def _keep(extras, n, rows, ex):
+    """Store ``fun``'s extras of the rows evaluated (NaN rows until a row is)."""
+    for key, val in ex.items():
+        if key not in extras:
+            extras[key] = np.full((n,) + val.shape[1:], np.nan, dtype=val.dtype)
+        extras[key][rows] = val
+
+
+def _residual_and_inverse(fun, active, sel, za, fresh, Jinv, extras, n):
+    """One Newton iteration's residual of the rows ``active`` (``sel``: their index, or all), with a
+    fresh Jacobian, inverted into Jinv, for the rows that need one (``fresh``)."""
+    if fresh.all():
+        r, J, ex = fun(active, za, True)
+        _keep(extras, n, sel, ex)
+        if isinstance(sel, slice):
+            Jinv[...] = invert_batched(J)
+        else:
+            Jinv[active] = invert_batched(J)
+        return r
+    r = np.empty_like(za)
+    if fresh.any():
+        r[fresh], J, ex = fun(active[fresh], za[fresh], True)
+        _keep(extras, n, active[fresh], ex)
+        Jinv[active[fresh]] = invert_batched(J)
+    r[~fresh], _, ex = fun(active[~fresh], za[~fresh], False)
+    _keep(extras, n, active[~fresh], ex)
+    return r
 
 
 # --- the step ---
@@ -417,45 +426,58 @@ class Stepper:
             if not jacobian:
                 return r, None, extras
 
-            J = np.zeros((m, self.nz, self.nz), dtype=z.dtype)
-            Sx = contract_first(sysm.ddtheta(M), L) if self.coupled and rec.pre_at == "midpoint" else None
-            blocks = stage_jacobian_blocks(tab, st)
-            for i in range(s):
-                for j in range(s):
-                    B = blocks[i][j]
-                    if Sx is not None:
-                        B = B - (0.5 * tab.b[j]) * Sx
-                    J[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = B
-            if self.coupled:
-                TxT = np.swapaxes(Tx, -1, -2)
-                dpb_dL = TxT if Sx is None else TxT + Sx
-                shift = stage_jacobian_shift(tab, st)
-                for i in range(s):
-                    J[:, i * d:(i + 1) * d, iL:iL + d] = shift[i] - dpb_dL
-                if rec.post_at == "end":
-                    S1 = contract_first(sysm.ddtheta(q1), L)
-                    dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (1.0 + sig) * S1
-                    extra_Y = sig * S1
-                else:
-                    dp1_dL = (1.0 + sig) * dpb_dL
-                    extra_Y = (0.5 * (1.0 + sig)) * Sx
-                ThetaT = np.swapaxes(st.Theta, -1, -2)
-                KS = weigh(tab.b, np.zeros_like(tab.b), st.K)
-                rows = slice(iL, iL + d)
-                for j in range(s):
-                    KB = tab.b[0] * tab.a[0, j] * st.K[:, 0]
-                    for l in range(1, s):
-                        KB = KB + tab.b[l] * tab.a[l, j] * st.K[:, l]
-                    dp1 = KB + tab.b[j] * ThetaT[:, j] + tab.b[j] * extra_Y
-                    J[:, rows, j * d:(j + 1) * d] = dp1 - tab.b[j] * T1
-                J[:, rows, iL:iL + d] = dp1_dL + KS - (1.0 + sig) * T1
-            if self.lobatto:
-                for i in range(s):
-                    J[:, i * d:(i + 1) * d, iM:iM + d] = (tab.d[i] / tab.b[i]) * np.eye(d)
-                    J[:, iM:iM + d, i * d:(i + 1) * d] = tab.d[i] * np.eye(d)
+            J = self._jacobian(z, st, L, Tx if self.coupled else None, T1 if self.coupled else None,
+                               q1 if self.coupled else None, M if self.coupled and rec.pre_at == "midpoint" else None)
             return r, J, extras
 
         return fun, unpack, qbar, pbar, Theta_q
+
+    def _jacobian(self, z, st, L, Tx, T1, q1, M):
+        """The exact Jacobian (m, nz, nz) of the step's equations at the stage values ``st``: the
+        stage blocks, the coupled projection's rows and columns (ϑ_q of the pre term Tx, of the
+        end T1, the end point q1, the midpoint M where ϑ_q is taken there), the Lobatto rows."""
+        sysm, tab, sig, rec = self.system, self.tableau, self.sigma, self.record
+        s, d, m = self.s, self.d, z.shape[0]
+        sd = s * d
+        iL = sd if self.coupled else None
+        iM = sd + (d if self.coupled else 0) if self.lobatto else None
+        J = np.zeros((m, self.nz, self.nz), dtype=z.dtype)
+        Sx = contract_first(sysm.ddtheta(M), L) if self.coupled and rec.pre_at == "midpoint" else None
+        blocks = stage_jacobian_blocks(tab, st)
+        for i in range(s):
+            for j in range(s):
+                B = blocks[i][j]
+                if Sx is not None:
+                    B = B - (0.5 * tab.b[j]) * Sx
+                J[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = B
+        if self.coupled:
+            TxT = np.swapaxes(Tx, -1, -2)
+            dpb_dL = TxT if Sx is None else TxT + Sx
+            shift = stage_jacobian_shift(tab, st)
+            for i in range(s):
+                J[:, i * d:(i + 1) * d, iL:iL + d] = shift[i] - dpb_dL
+            if rec.post_at == "end":
+                S1 = contract_first(sysm.ddtheta(q1), L)
+                dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (1.0 + sig) * S1
+                extra_Y = sig * S1
+            else:
+                dp1_dL = (1.0 + sig) * dpb_dL
+                extra_Y = (0.5 * (1.0 + sig)) * Sx
+            ThetaT = np.swapaxes(st.Theta, -1, -2)
+            KS = weigh(tab.b, np.zeros_like(tab.b), st.K)
+            rows = slice(iL, iL + d)
+            for j in range(s):
+                KB = tab.b[0] * tab.a[0, j] * st.K[:, 0]
+                for l in range(1, s):
+                    KB = KB + tab.b[l] * tab.a[l, j] * st.K[:, l]
+                dp1 = KB + tab.b[j] * ThetaT[:, j] + tab.b[j] * extra_Y
+                J[:, rows, j * d:(j + 1) * d] = dp1 - tab.b[j] * T1
+            J[:, rows, iL:iL + d] = dp1_dL + KS - (1.0 + sig) * T1
+        if self.lobatto:
+            for i in range(s):
+                J[:, i * d:(i + 1) * d, iM:iM + d] = (tab.d[i] / tab.b[i]) * np.eye(d)
+                J[:, iM:iM + d, i * d:(i + 1) * d] = tab.d[i] * np.eye(d)
+        return J
 
     def step(self, q, p, Lam, Y0, mu0, jinv=None, known=None):
         """Advance n points by one step.

@@ -83,7 +83,7 @@ def defects_dd(system, tableau, projection, q, h):
         x0 = [_mp(q2[i]) + _mp(p2[i]) + _mp(lam2[i]) for i in range(m)]
         e = int(round(np.log2(FD_STEP_DD)))
         deltas = [[mpmath.ldexp(1, int(mpmath.floor(mpmath.log(max(abs(v), 1), 2))) + e) for v in x] for x in x0]
-        inputs, index = [], []
+        inputs = []
         for i in range(m):
             inputs.append(x0[i])
             for k, _ in FD_ORDER8_EXACT:

@@ -25,7 +25,6 @@ points), :mod:`.clocks` (the phases' seconds) and :mod:`.stop` (a stop request, 
 from __future__ import annotations
 
 import dataclasses
-import os
 import secrets
 import shutil
 import sys
@@ -174,30 +173,43 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     after_output : optional callback(pair, step) on rank 0 after each flushed output (tests use it).
     stop : a :class:`StopRequest` (or any callable that raises to stop), checked before each pair
         and between the engine's calls: the file stays readable up to its last output.
+
+    The steps, each its own function: check everything that can be checked before a file is
+    touched (:func:`_preflight`), open the output and list the pairs to run (:func:`_open_output`),
+    advance them (:func:`_advance_pairs`), close the file and summarise it (:func:`_finish`).
     """
     check = stop if stop is not None else (lambda: None)
-    from invariants import UNDER_RESOLVED
     comm = comm or communicator()
-    rank = comm.rank
     path = Path(path)
     set_threads(threads or default_threads(comm))
+    system, q0, grown_from = _preflight(comm, scene, path, resume, force)
+    opened = _open_output(comm, scene, path, system, q0, resume, grown_from, version)
+    timings = _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, progress, check)
+    return _finish(path, scene, opened, timings) if comm.rank == 0 else None
+
+
+def _agree(comm, error):
+    """Rank 0's one-line error (or None) on every rank, raised there as a ValueError."""
+    error = comm.bcast(error if comm.rank == 0 else None, root=0)
+    if error:
+        raise ValueError(error)
+
+
+def _preflight(comm, scene, path, resume, force):
+    """What can fail before any file is touched, checked on rank 0 and agreed by every rank: the
+    output (exists, --force, --resume and what it may continue), the engine's code for the system
+    (compiled now), the first output's row.  Returns (system, the points q0, the run's step count
+    before an extension or None)."""
     error, grown_from = None, None
-    if rank == 0:
+    if comm.rank == 0:
         error = _check_output(path, resume, force)
         if error is None and resume:
             try:
                 grown_from = _resume_plan(path, scene)
-            except ValueError as exc:
-                error = str(exc)
-        if error is None and resume:
-            try:
                 output.check_resumable(path, scene)       # read-only: a refused resume changes no byte
             except ValueError as exc:
                 error = str(exc)
-    error = comm.bcast(error, root=0)
-    if error:
-        raise ValueError(error)
-
+    _agree(comm, error)
     system = scene.system()
     error = None
     from ..codegen import CacheError, point_functions
@@ -208,68 +220,76 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
     except Exception as exc:
         error = f"system {system.name}: the step engine cannot be compiled for it: {type(exc).__name__}: " \
             f"{str(exc).splitlines()[0] if str(exc) else ''}"
-    error = comm.bcast(error if rank == 0 else None, root=0)
-    if error:
-        raise ValueError(error)
+    _agree(comm, error)
     q0 = scene.points(system)
-    n = q0.shape[0]
-    error = _trial_output(scene, system, q0) if rank == 0 else None
-    error = comm.bcast(error, root=0)
-    if error:
-        raise ValueError(error)
+    _agree(comm, _trial_output(scene, system, q0) if comm.rank == 0 else None)
+    return system, q0, grown_from
 
-    f = None
-    todo = []
-    replacing = None                   # --force over an existing file: written beside it, renamed over it once started
+
+@dataclasses.dataclass
+class _Opened:
+    """The output as :func:`_open_output` leaves it: the file (rank 0's; None elsewhere), the pairs'
+    jobs in scene order (None: finished; else (start step, saved state or a marker)), the file being
+    replaced (--force, an extension) and the token naming this run's checkpoint slabs."""
+    f: object
+    todo: list
+    replacing: object
+    token: str
+
+
+def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> _Opened:
+    """Rank 0 creates, reopens or copies the output (inside a critical section: a stop signal waits)
+    and lists what each pair has left to do; every rank gets the list (without the saved states:
+    each rank gets its own rows of one when its pair begins) and the slab token."""
+    from invariants import UNDER_RESOLVED
+    rank, n = comm.rank, q0.shape[0]
+    f, todo, replacing = None, [], None
     token = secrets.token_hex(4)       # names this run's checkpoint slabs (rank 0's, sent with the pairs to run)
     if rank == 0:
-        crit = critical()
-        crit.__enter__()
-        try:
-            if scene.checkpoints == "per-rank":
-                folder = output.state_dir(path)
-                try:
-                    folder.mkdir(exist_ok=True)
-                except OSError as exc:
-                    raise output.OutputError(f"cannot make the checkpoint folder '{folder}' "
-                                             f"(output.checkpoints = \"per-rank\"): {output.plain_error(exc)}") from None
-            if resume and grown_from is not None:
-                # an extension works on a copy, which replaces the file once its first new rows are
-                # written: a failure before that leaves the finished file byte for byte as it was
-                replacing = Replacement(path.resolve())
-                try:
-                    shutil.copyfile(path, replacing.new)
-                    shutil.copymode(path, replacing.new)
-                except OSError as exc:
-                    replacing.abandon()
-                    raise output.OutputError(f"cannot extend '{path}': its working copy cannot be written "
-                                             f"({output.plain_error(exc)}); the file is as it was") from None
-                f = output.reopen(replacing.new, scene)
-            elif resume:
-                f = output.reopen(path, scene)
-            else:
-                target = path
-                if path.exists():
-                    replacing = Replacement(path.resolve())      # (through a symlink: its target)
-                    target = replacing.new
-                f = output.create(target, scene, version, n, State.schema(n, system.d, scene.max_stages, scene.precision),
-                                  UNDER_RESOLVED)
-            if "energy" in scene.diagnostics:       # where a relative energy error has no scale
-                from .diagnostics import _scalars
-                output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
-            for tab, proj in scene.pairs:
-                todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
-                                                finished_too=grown_from is not None))
-            f.flush()
-            if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
-                output.prune_slabs(f, path, token)
-        except (OSError, ValueError) as exc:
-            todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
-                output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
-            if f is not None:
-                close_quietly(f)
-        finally:
-            crit.__exit__(None, None, None)
+        with critical():
+            try:
+                if scene.checkpoints == "per-rank":
+                    folder = output.state_dir(path)
+                    try:
+                        folder.mkdir(exist_ok=True)
+                    except OSError as exc:
+                        raise output.OutputError(f"cannot make the checkpoint folder '{folder}' (output.checkpoints "
+                                                 f"= \"per-rank\"): {output.plain_error(exc)}") from None
+                if resume and grown_from is not None:
+                    # an extension works on a copy, which replaces the file once its first new rows are
+                    # written: a failure before that leaves the finished file byte for byte as it was
+                    replacing = Replacement(path.resolve())
+                    try:
+                        shutil.copyfile(path, replacing.new)
+                        shutil.copymode(path, replacing.new)
+                    except OSError as exc:
+                        replacing.abandon()
+                        raise output.OutputError(f"cannot extend '{path}': its working copy cannot be written "
+                                                 f"({output.plain_error(exc)}); the file is as it was") from None
+                    f = output.reopen(replacing.new, scene)
+                elif resume:
+                    f = output.reopen(path, scene)
+                else:
+                    target = path
+                    if path.exists():
+                        replacing = Replacement(path.resolve())      # (through a symlink: its target)
+                        target = replacing.new
+                    f = output.create(target, scene, version, n,
+                                      State.schema(n, system.d, scene.max_stages, scene.precision), UNDER_RESOLVED)
+                if "energy" in scene.diagnostics:       # where a relative energy error has no scale
+                    from .diagnostics import _scalars
+                    output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
+                for tab, proj in scene.pairs:
+                    todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
+                                                    finished_too=grown_from is not None))
+                f.flush()
+                if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
+                    output.prune_slabs(f, path, token)
+            except (OSError, ValueError) as exc:
+                todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
+                    output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
+                if f is not None:
+                    close_quietly(f)
     # the pairs to run go to every rank without their saved states (a state is every point's:
     # 314 bytes a point and pair); each rank gets its own rows of one when its pair begins
     sent = todo if rank != 0 or isinstance(todo, Exception) else \
@@ -281,19 +301,28 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         if replacing is not None:
             replacing.abandon()
         raise todo
-    retry = "the same command (--resume)" if resume else "--force"   # after a failure before the file was replaced
+    return _Opened(f, todo, replacing, token)
 
+
+def _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, progress, check) -> dict:
+    """Every pair with work left, in scene order, through :func:`_run_pair`; then the last batches.
+    Returns the pairs' clocks ({pair: timings}, rank 0).  A failed write leaves the file readable
+    up to its last output, or — for --force and an extension that had not yet replaced it — the
+    old file as it was; the one-line error says which and what to run next."""
+    from invariants import UNDER_RESOLVED
+    rank, f, replacing = comm.rank, opened.f, opened.replacing
+    retry = "the same command (--resume)" if resume else "--force"   # after a failure before the file was replaced
     timings = {}
-    steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in todo) or 1
+    steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in opened.todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or _interactive())))
     try:
-        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED, output.state_dir(path), token)
+        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED, output.state_dir(path), opened.token)
         if replacing is not None:      # the old file goes once the new run has written its first rows
             def started():             # ... and with it the old run's checkpoint slabs
                 replacing.commit()
-                output.prune_slabs(f, path, token)
+                output.prune_slabs(f, path, opened.token)
             stream.writer.started = started
-        jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, todo) if job is not None]
+        jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, opened.todo) if job is not None]
         for i, (tab_name, proj, job) in enumerate(jobs):
             check()
             _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, i == 0, i + 1 < len(jobs), bar, check)
@@ -327,12 +356,16 @@ def run(scene, path, *, resume=False, force=False, comm=None, progress=None, ver
         raise
     finally:
         bar.close()
-    if rank != 0:
-        return None
+    return timings
+
+
+def _finish(path, scene, opened, timings) -> list:
+    """Rank 0: close the file (replacing the old one if it has not been yet: a scene with no pair to
+    run writes no rows), read the summaries back, attach the pairs' clocks."""
     with critical():
-        f.close()
-        if replacing is not None:      # (a scene with no pair to run has written no rows)
-            replacing.commit()
+        opened.f.close()
+        if opened.replacing is not None:
+            opened.replacing.commit()
         summaries = finalize(path, scene)
     for s_ in summaries:
         s_.timings = timings.get(s_.pair, {})
@@ -346,14 +379,7 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
     n, h = q0.shape[0], scene.h
     name = output.pair_name(tab_name, proj)
     start_step, saved = job
-    if proj == "map":                          # a user's step map (run.step_maps)
-        def make_engine():
-            return MapEngine(scene.step_map(tab_name), system, h, tab_name)
-        s_tab = 1
-    else:
-        def make_engine():
-            return Engine(system, scene.tableau(tab_name), proj, h, precision=scene.precision)
-        s_tab = scene.tableau(tab_name).s
+    make_engine, s_tab = _engine_maker(scene, system, tab_name, proj)
     engine = make_engine()
     clock = pair_clock()
     w0 = time.perf_counter()
@@ -364,14 +390,7 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
     clock["wait_plan"] = clock["gather"] = time.perf_counter() - w0
     blocks, batch, cadence = plan
     lo, hi = blocks[rank]
-    if saved is None:
-        st = engine.state(q0[lo:hi])
-    else:
-        rows = None
-        if rank == 0:
-            saved = _unpad(saved, s_tab)
-            rows = [{k: v[a:b] for k, v in saved.items()} for a, b in blocks]
-        st = State.from_checkpoint(comm.scatter(rows, root=0), h)     # this rank's rows of the saved state
+    st = _starting_state(comm, engine, q0, blocks, saved, s_tab, h)
     t_start = time.perf_counter()
     pair = _Pair(name, (lo, hi), Diagnostics(scene, system, q0[lo:hi]), clock, batch or 1, cadence or 1, t_start,
                  stream.spent.snapshot(), start_step, (start_step + scene.steps) // 2,
@@ -423,6 +442,29 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
         first_interval()
     stream.take(pair, st, scene.steps, checkpoint=scene.steps == final, flush=True, last=True)
     pair.t_end = time.perf_counter()
+
+
+def _engine_maker(scene, system, tab_name, proj):
+    """(a function making a fresh engine of the pair, its stage count s): the compiled engine in the
+    scene's precision, or a user's step map (run.step_maps) behind the same interface."""
+    h = scene.h
+    if proj == "map":
+        return (lambda: MapEngine(scene.step_map(tab_name), system, h, tab_name)), 1
+    return (lambda: Engine(system, scene.tableau(tab_name), proj, h, precision=scene.precision)), \
+        scene.tableau(tab_name).s
+
+
+def _starting_state(comm, engine, q0, blocks, saved, s_tab, h):
+    """This rank's points' state where its pair begins: from q0, or its rows of the saved checkpoint
+    (rank 0 holds it and scatters the rows)."""
+    lo, hi = blocks[comm.rank]
+    if saved is None:
+        return engine.state(q0[lo:hi])
+    rows = None
+    if comm.rank == 0:
+        saved = _unpad(saved, s_tab)
+        rows = [{k: v[a:b] for k, v in saved.items()} for a, b in blocks]
+    return State.from_checkpoint(comm.scatter(rows, root=0), h)
 
 
 def last_checkpoint_step(steps, every) -> int:

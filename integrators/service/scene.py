@@ -355,7 +355,54 @@ def _names(values, allowed, key, check=None):
 
 
 def parse_scene(text: str, origin: str = "<scene>") -> Scene:
-    """Validate TOML text into a Scene; raises SceneError naming the key."""
+    """Validate TOML text into a Scene; raises SceneError naming the key.
+
+    The tables in the order a reader meets them — the TOML and its tables' keys, [system], the
+    sample sets, [run]'s pairs, steps and records, [output] — each checked by its own function, the
+    first mistake reported; then what needs the whole scene (memory, the points, user code)."""
+    data = _tables(text, origin)
+    sysd, run = data["system"], data["run"]
+    base = str(Path(origin).parent) if origin != "<scene>" else None
+    system, params, spec = _system_of(sysd, base)
+    loop, surface = _sets_of(data)
+    maps, tabs, tableau_files, projs = _pairs_of(run, base)
+    h, steps, every = _steps_of(run)
+    forms = _names(run.get("forms", ["canonical", "noncanonical"]), FORMS, "run.forms")
+    default_diags = [x for x in DIAGNOSTICS if x != "momentum" or system.has_momentum]
+    diags = _names(run.get("diagnostics", default_diags), DIAGNOSTICS, "run.diagnostics")
+    if "momentum" in diags and not system.has_momentum:
+        raise SceneError(f"run.diagnostics: system '{system.name}' has no Noether momentum")
+    for t in tabs:
+        tab = builtin_tableau(t) if t not in tableau_files else _tableau_file(tableau_files[t])
+        for p in projs:
+            why = admission(tab, p)
+            if why:
+                raise SceneError(f"run: {why}")
+    precision = run.get("precision", "double")
+    if precision not in PRECISIONS:
+        raise SceneError(f"run.precision must be one of {', '.join(map(repr, PRECISIONS))}, got {precision!r}")
+    if precision != "double" and maps:
+        raise SceneError("run.precision = \"double-double\" is the compiled engine's: a step map (run.step_maps) "
+                         "runs in double; give it a scene of its own")
+    name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
+    for key, value in (("name", name), ("system.name", sysd.get("name", ""))):
+        if not value.isprintable():
+            raise SceneError(f"'{key}' holds control characters (a newline or a terminal escape): {value!r}")
+    out, ck_seconds, ck_mode = _output_of(data.get("output", {}), name)
+    scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
+                  tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
+                  diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
+                  checkpoint_seconds=ck_seconds, checkpoints=ck_mode,
+                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps, precision=precision)
+    _check_memory(scene, system)
+    _check_points(scene, system)
+    for label in {step_map_label(m) for m in maps}:
+        scene.step_map(label)             # import now: a missing file or function is a one-line error
+    return scene
+
+
+def _tables(text, origin) -> dict:
+    """The TOML (restricted reader) with its tables present and their keys known and typed."""
     from ..expressions import load_toml
     try:
         data = load_toml(text, origin)
@@ -370,8 +417,15 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     for sec in ("system", "loop", "surface", "run", "output"):
         if sec in data:
             _check_table(data[sec], sec)
-    sysd, run = data["system"], data["run"]
-    base = str(Path(origin).parent) if origin != "<scene>" else None
+    return data
+
+
+def _finite(v) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+
+
+def _system_of(sysd, base):
+    """[system]: (the System, its parameters, the user system's spec or {})."""
     user = any(k in sysd for k in ("coordinates", "function"))
     if not user:
         if "name" not in sysd:
@@ -384,18 +438,19 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
             if k in sysd:
                 raise SceneError(f"system.{k} needs system.coordinates (a built-in system brings its own)")
     params = dict(sysd.get("params", {}))
-    def finite(v):
-        return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-
     for k, v in params.items():
         if isinstance(v, list):          # a vector parameter given whole, as in Python: gamma = [0.1, 0.1]
-            if not v or not all(finite(x) for x in v):
+            if not v or not all(_finite(x) for x in v):
                 raise SceneError(f"system.params.{k} must be a finite number or a list of them, got {v!r}")
             params[k] = tuple(float(x) for x in v)
-        elif not finite(v):
+        elif not _finite(v):
             raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
     spec = {k: v for k, v in sysd.items() if k != "params"} if user else {}
-    system = _make_system(spec or {"name": sysd["name"]}, params, base)
+    return _make_system(spec or {"name": sysd["name"]}, params, base), params, spec
+
+
+def _sets_of(data):
+    """[loop] and [surface]: (LoopSpec or None, SurfaceSpec or None), at least one."""
     if "loop" not in data and "surface" not in data:
         raise SceneError("the scene needs a [loop] or a [surface] of sample points")
     loop = surface = None
@@ -418,6 +473,11 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
             raise SceneError(f"{set_.name}.refine_to = {set_.refine_to:,} allows no refinement: the {set_.name}'s "
                              f"first refinement has {set_.at_level(1).count:,} points "
                              f"({_grid_text(set_.at_level(1))}); give at least that, or leave refine_to out")
+    return loop, surface
+
+
+def _pairs_of(run, base):
+    """[run]'s pairs: (step maps, tableau labels, {label: tableau file}, projections)."""
     maps = tuple(run.get("step_maps", ()))
     for key in ("h", "steps") + (() if maps else ("tableaus", "projections")):
         if key not in run:
@@ -433,6 +493,11 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     projs = _names(run["projections"], PROJECTIONS, "run.projections") if "projections" in run else ()
     if bool(tabs) != bool(projs):
         raise SceneError("run.tableaus and run.projections go together: give both or neither")
+    return maps, tabs, tableau_files, projs
+
+
+def _steps_of(run):
+    """[run]'s (h, steps, output_every)."""
     h = float(run["h"])
     if not math.isfinite(h) or h <= 0:
         raise SceneError(f"run.h must be a finite positive number, got {run['h']!r}")
@@ -446,44 +511,19 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     every = run.get("output_every", max(1, steps // 100))
     if every <= 0 or every > steps:
         raise SceneError(f"run.output_every must be between 1 and run.steps = {steps}, got {every}")
-    forms = _names(run.get("forms", ["canonical", "noncanonical"]), FORMS, "run.forms")
-    default_diags = [x for x in DIAGNOSTICS if x != "momentum" or system.has_momentum]
-    diags = _names(run.get("diagnostics", default_diags), DIAGNOSTICS, "run.diagnostics")
-    if "momentum" in diags and not system.has_momentum:
-        raise SceneError(f"run.diagnostics: system '{system.name}' has no Noether momentum")
-    for t in tabs:
-        tab = builtin_tableau(t) if t not in tableau_files else _tableau_file(tableau_files[t])
-        for p in projs:
-            why = admission(tab, p)
-            if why:
-                raise SceneError(f"run: {why}")
-    precision = run.get("precision", "double")
-    if precision not in PRECISIONS:
-        raise SceneError(f"run.precision must be one of {', '.join(map(repr, PRECISIONS))}, got {precision!r}")
-    if precision != "double" and maps:
-        raise SceneError("run.precision = \"double-double\" is the compiled engine's: a step map (run.step_maps) "
-                         "runs in double; give it a scene of its own")
-    name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
-    for key, value in (("name", name), ("system.name", sysd.get("name", ""))):
-        if not value.isprintable():
-            raise SceneError(f"'{key}' holds control characters (a newline or a terminal escape): {value!r}")
-    out = data.get("output", {}).get("path", f"{name}.h5")
-    ck_seconds = float(data.get("output", {}).get("checkpoint_seconds", CHECKPOINT_SECONDS))
+    return h, steps, every
+
+
+def _output_of(out, name):
+    """[output]: (path, checkpoint_seconds, checkpoints)."""
+    path = out.get("path", f"{name}.h5")
+    ck_seconds = float(out.get("checkpoint_seconds", CHECKPOINT_SECONDS))
     if not (math.isfinite(ck_seconds) and ck_seconds >= 0):
         raise SceneError(f"output.checkpoint_seconds must be a finite number ≥ 0, got {ck_seconds!r}")
-    ck_mode = data.get("output", {}).get("checkpoints", "in-file")
+    ck_mode = out.get("checkpoints", "in-file")
     if ck_mode not in ("in-file", "per-rank"):
         raise SceneError(f"output.checkpoints must be \"in-file\" or \"per-rank\", got {ck_mode!r}")
-    scene = Scene(name=name, system_name=system.name, system_params=params, loop=loop, surface=surface,
-                  tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
-                  diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
-                  checkpoint_seconds=ck_seconds, checkpoints=ck_mode,
-                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps, precision=precision)
-    _check_memory(scene, system)
-    _check_points(scene, system)
-    for label in {step_map_label(m) for m in maps}:
-        scene.step_map(label)             # import now: a missing file or function is a one-line error
-    return scene
+    return path, ck_seconds, ck_mode
 
 
 def step_map_label(spec):
