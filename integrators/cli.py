@@ -235,7 +235,7 @@ def cmd_run(args) -> int:
               f"{comm.size} rank{'s' if comm.size > 1 else ''} × {threads} thread{'s' if threads > 1 else ''}",
               flush=True)
         if scene.checkpoints == "per-rank":
-            from .service.output import state_dir
+            from .service.checkpoints import state_dir
             print(f"checkpoints: every rank writes its points' state into '{_printable(state_dir(out))}' "
                   "(keep that folder beside the file to resume it)", flush=True)
         from .engine import kernel_cached
@@ -438,7 +438,7 @@ def build_parser():
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     rank = _rank()
-    from .service.output import OutputError
+    from .service.files import OutputError
 
     def say(msg):
         # input errors are the same on every rank: print them once; say which rank otherwise

@@ -118,7 +118,8 @@ def citations(name, tree):
     return found
 
 
-DRIVER_PARTS = ("transport", "tasks", "refine", "writer", "ranks", "clocks", "diagnostics", "output", "stop")
+DRIVER_PARTS = ("transport", "tasks", "refine", "writer", "ranks", "clocks", "diagnostics", "output", "checkpoints",
+                "statuses", "resumable", "files", "reader", "stop")
 
 
 def driver_parts(graph) -> list:
@@ -137,16 +138,17 @@ def driver_parts(graph) -> list:
               "1. `engine.march` advances the rank's block; at each output `_Stream.take` keeps the points' "
               "errors (`diagnostics`) and the rank's part of each set (`tasks.Tasks.parts`); at a checkpoint "
               "its points' state, copied for rank 0 or, with `output.checkpoints = \"per-rank\"`, written "
-              "as its own slab file (`_Stream.write_slab` → `output.write_slab`).",
+              "as its own slab file (`_Stream.write_slab` → `checkpoints.write_slab`).",
               "2. At the batch's end `_Stream.close_batch` sends the parts to the batch's task owners "
               "(`tasks.Tasks.assign`: each set to the rank given the least task work so far; `transport.Transport.send`) "
               "and goes on advancing.",
               "3. A task owner, once the parts are here (`transport.Transport.arrived`), computes the sets' "
               "values (`tasks.Tasks.run`; a refining set through `refine`) and sends them with its errors "
               "and pieces to rank 0.",
-              "4. Rank 0 writes the batch's rows in order (`writer.Writer.write` → `output`), the state or "
-              "the links to the ranks' slabs (`output.link_checkpoint`), a pair's "
-              "status and clocks at its end (`writer.Writer.finish_pair`), and from about each pair's middle "
+              "4. Rank 0 writes the batch's rows in order (`writer.Writer.write` → `output.write_rows`), the "
+              "state or the links to the ranks' slabs (`checkpoints.link_checkpoint`), a pair's "
+              "status and clocks at its end (`writer.Writer.finish_pair` → `statuses.close_pair`), and from "
+              "about each pair's middle "
               "sends the next pair's split (`ranks.Planner`, from the rates every rank sent; `clocks.Spent` "
               "keeps them net of output work).",
               "5. `stop.StopRequest`, passed in, is checked between the engine's calls."]
@@ -170,7 +172,8 @@ def main():
              "where each equation or section of the paper that a docstring cites is implemented.", "",
              "Four layers: the numerical **core** (`integrators`: tableaus, systems, projections, the compiled "
              "kernel and its engine, `integrate`), **invariants** (`invariants`), the **service** "
-             "(`integrators.service`: scenes, ranks, driver, diagnostics, output, plots, plugins) and the "
+             "(`integrators.service`: scenes, ranks, driver, diagnostics, the run file — output, checkpoints, "
+             "statuses, resumable, files, reader — plots, plugins) and the "
              "**audit** (`integrators.audit`), with the command line (`integrators.cli`) on top of "
              "both.  A layer imports only itself and the layers before it "
              "(core and invariants import neither the service nor the audit, the service not the audit), "

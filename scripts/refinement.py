@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from integrators.service import driver  # noqa: E402
 from integrators.service.api import scene_text  # noqa: E402
-from integrators.service.output import read_run  # noqa: E402
+from integrators.service.reader import read_run  # noqa: E402
 from integrators.service.scene import parse_scene, scene_source  # noqa: E402
 
 

@@ -178,7 +178,7 @@ def write_cost(points=12000, repeat=5):
     fletcher32 chunks, slot invalidated, written, validated, three flushes); median of ``repeat``."""
     import h5py
     from integrators import State
-    from integrators.service import output
+    from integrators.service import checkpoints
     schema = State.schema(points, 4, 3)
     state = {k: np.ones(shape, dtype) for k, (shape, dtype) in schema.items()}
     nbytes = sum(v.nbytes for v in state.values())
@@ -187,34 +187,34 @@ def write_cost(points=12000, repeat=5):
         ts = []
         for k in range(repeat):
             t0 = time.perf_counter()
-            output.write_checkpoint(f, g, k, state)
+            checkpoints.write_checkpoint(f, g, k, state)
             ts.append(time.perf_counter() - t0)
     return dict(bytes=nbytes, seconds=float(np.median(ts)), seconds_per_byte=float(np.median(ts)) / nbytes)
 
 
 def slab_cost(points=12000, ranks=2, repeat=5):
     """Seconds a byte of one rank's checkpoint slab takes to write with output.checkpoints =
-    "per-rank" (output.write_slab: a file of its own, fletcher32 chunks, closed); median of ``repeat``."""
+    "per-rank" (checkpoints.write_slab: a file of its own, fletcher32 chunks, closed); median of ``repeat``."""
     from integrators import State
-    from integrators.service import output
+    from integrators.service import checkpoints
     state = {k: np.ones(shape, dtype) for k, (shape, dtype) in State.schema(points // ranks, 4, 3).items()}
     nbytes = sum(v.nbytes for v in state.values())
     ts = []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(repeat):
             t0 = time.perf_counter()
-            output.write_slab(Path(tmp), f"s{k}.h5", state, 3)
+            checkpoints.write_slab(Path(tmp), f"s{k}.h5", state, 3)
             ts.append(time.perf_counter() - t0)
     return dict(bytes=nbytes, seconds=float(np.median(ts)), seconds_per_byte=float(np.median(ts)) / nbytes)
 
 
 def link_cost(points=1_000_000, slabs=(16, 128, 1024), repeat=3):
     """Rank 0's seconds to link one per-rank checkpoint of ``points`` points written as R slabs
-    (output.link_checkpoint: a virtual dataset a field, R mappings each), for each R; and the fit
+    (checkpoints.link_checkpoint: a virtual dataset a field, R mappings each), for each R; and the fit
     seconds = a + b·R."""
     import h5py
     from integrators import State
-    from integrators.service import output
+    from integrators.service import checkpoints
     schema = State.schema(points, 4, 3)
     res = {}
     with tempfile.TemporaryDirectory() as tmp, h5py.File(Path(tmp) / "w.h5", "w") as f:
@@ -227,7 +227,7 @@ def link_cost(points=1_000_000, slabs=(16, 128, 1024), repeat=3):
             ts = []
             for k in range(repeat):
                 t0 = time.perf_counter()
-                output.link_checkpoint(f, g, k, links, folder)
+                checkpoints.link_checkpoint(f, g, k, links, folder)
                 ts.append(time.perf_counter() - t0)
             res[r] = float(np.median(ts))
     R = np.array(list(res), float)

@@ -226,7 +226,7 @@ def test_a_double_double_scene_says_so_keeps_the_low_parts_and_resumes_bitwise(t
     scene in double sits at double's round-off), and a run stopped after output 8 of GLRK2-none
     (states every 3rd output) resumes to the uninterrupted run's bits."""
     import h5py
-    from integrators.service import driver, output
+    from integrators.service import driver, reader
     from integrators.service.scene import parse_scene
     from test_service import dump, same, stop_at_output_8
     scene = parse_scene(DD_SCENE)
@@ -234,7 +234,7 @@ def test_a_double_double_scene_says_so_keeps_the_low_parts_and_resumes_bitwise(t
     full, part, dbl = tmp_path / "full.h5", tmp_path / "part.h5", tmp_path / "double.h5"
     driver.run(scene, full, progress=False)
     driver.run(parse_scene(DD_SCENE.replace('precision = "double-double"', "")), dbl, progress=False)
-    run, double = output.read_run(full), output.read_run(dbl)
+    run, double = reader.read_run(full), reader.read_run(dbl)
     assert run.precision == "double-double" and double.precision == "double"
     with h5py.File(full) as f:
         ck = f["runs/GLRK2-symmetric/checkpoint/a"]

@@ -453,9 +453,9 @@ def test_a_reordered_scene_with_more_steps_names_only_what_differs(tmp_path):
 
 
 def test_a_full_disk_before_any_row_says_nothing_was_written(tmp_path, monkeypatch):
-    from integrators.service import output
-    monkeypatch.setattr(output, "available_bytes", lambda path: 0.0)
-    with pytest.raises(output.OutputError, match="the file holds no output yet"):
+    from integrators.service import files
+    monkeypatch.setattr(files, "available_bytes", lambda path: 0.0)
+    with pytest.raises(files.OutputError, match="the file holds no output yet"):
         driver.run(scene(20), tmp_path / "a.h5", progress=False)
 
 

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 import pytest
 
-from integrators.service import driver, output
+from integrators.service import driver, files, output
 from integrators.cli import main as cli_main
 from integrators.service.scene import SceneError, parse_scene
 from test_edges import BIN, LV, USER, one_line, poincare
@@ -200,11 +200,11 @@ def test_a_truncated_file_is_called_damaged_not_locked(tmp_path):
 
 
 def test_lock_errors_are_told_from_damage():
-    assert output.is_lock_error(BlockingIOError(11, "Resource temporarily unavailable"))
-    assert output.is_lock_error(OSError("Unable to open file (unable to lock file, errno = 11, error message = "
+    assert files.is_lock_error(BlockingIOError(11, "Resource temporarily unavailable"))
+    assert files.is_lock_error(OSError("Unable to open file (unable to lock file, errno = 11, error message = "
                                         "'Resource temporarily unavailable')"))
-    assert not output.is_lock_error(OSError("Unable to open file (bad object header version number)"))
-    assert not output.is_lock_error(OSError("Unable to open file (truncated file: eof = 512, sblock->base_addr "
+    assert not files.is_lock_error(OSError("Unable to open file (bad object header version number)"))
+    assert not files.is_lock_error(OSError("Unable to open file (truncated file: eof = 512, sblock->base_addr "
                                             "= 0, stored_eof = 96000)"))
 
 
@@ -215,7 +215,7 @@ def test_two_runs_creating_one_file_at_once(tmp_path):
     out = tmp_path / "a.h5"
     first = h5py.File(out, "w")                   # another run created it after our check
     try:
-        with pytest.raises(output.BusyFile, match="another process"):
+        with pytest.raises(files.BusyFile, match="another process"):
             output.create(out, sc, "0", 64, {}, 1e-10)
     finally:
         first.close()
@@ -363,7 +363,7 @@ def test_an_os_error_during_force_abandons_the_replacement(tmp_path, monkeypatch
     def broken(*a, **k):
         raise OSError(5, "Input/output error")
     monkeypatch.setattr(output, "write_rows", broken)
-    with pytest.raises(output.OutputError, match="Input/output error.*as it was.*--force"):
+    with pytest.raises(files.OutputError, match="Input/output error.*as it was.*--force"):
         driver.run(parse_scene(LV), out, force=True, progress=False)
     assert out.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["a.h5"]
 

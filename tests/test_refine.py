@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from integrators.service import driver
-from integrators.service.output import read_run
+from integrators.service.reader import read_run
 from integrators.service.scene import SceneError, parse_scene
 from invariants.samples import first_level, loop, refined_grid, surface
 

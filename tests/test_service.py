@@ -189,7 +189,7 @@ def test_per_rank_checkpoints_resume_to_the_in_file_bits(tmp_path, monkeypatch, 
     output), with a stray slab of another run planted beside it, resumed with either setting: every
     value of the file, the settled checkpoints read through the links too, is the uninterrupted
     in-file run's; the folder then holds exactly the slabs the slots link."""
-    from integrators.service import output
+    from integrators.service import checkpoints
     scene = lambda mode: parse_scene(SMALL.replace('"symmetric", "symplectic"', '"symplectic"')
                                      + f'[output]\ncheckpoints = "{mode}"\n')
     full, part = tmp_path / "full.h5", tmp_path / "part.h5"
@@ -199,12 +199,12 @@ def test_per_rank_checkpoints_resume_to_the_in_file_bits(tmp_path, monkeypatch, 
     if first == "per-rank":
         with h5py.File(part) as f:
             c = f["runs/GLRK2-none/checkpoint/b"]          # the newest state (step 24), linked
-            assert c["q"].is_virtual and int(c["step"][()]) == 24 and output.slot_files(c)[0][1:] == (0, 464)
+            assert c["q"].is_virtual and int(c["step"][()]) == 24 and checkpoints.slot_files(c)[0][1:] == (0, 464)
         (folder / "GLRK2-none.27.0badf00d.0-464.h5").write_bytes(b"a stopped run's slab, never linked")
     driver.run(scene(then), part, progress=False, resume=True)
     assert same(dump(full), dump(part))
     with h5py.File(part) as f:
-        linked = {n for g in f["runs"].values() for s_ in "ab" for n, _, _ in output.slot_files(g[f"checkpoint/{s_}"])}
+        linked = {n for g in f["runs"].values() for s_ in "ab" for n, _, _ in checkpoints.slot_files(g[f"checkpoint/{s_}"])}
         virtual = {k for k, g in f["runs"].items() if g["checkpoint/a/q"].is_virtual}
     assert {p.name for p in folder.iterdir()} == linked
     assert virtual == ({"GLRK1-none", "GLRK1-symplectic"} if first == "per-rank" else set()) \

@@ -130,7 +130,8 @@ def test_system_from_reads_strings_with_the_restricted_parser(tmp_path, monkeypa
 
 # -- the service: statuses, exit codes, batch safety ---------------------------------------------------
 
-from integrators.service import driver, output  # noqa: E402
+from integrators.service import driver  # noqa: E402
+from integrators.service.checkpoints import slot_files  # noqa: E402
 from integrators.cli import main as cli_main  # noqa: E402
 from integrators.service.scene import SceneError, load_scene, parse_scene  # noqa: E402
 
@@ -356,7 +357,7 @@ def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path, ch
     skip = ("wall_clock",) if checkpoints == "per-rank" else ("wall_clock", "checkpoint")
     if checkpoints == "per-rank":
         with h5py.File(part) as f:
-            slabs = {k: sorted(output.slot_files(g["checkpoint/a"]), key=lambda x: x[1]) for k, g in f["runs"].items()}
+            slabs = {k: sorted(slot_files(g["checkpoint/a"]), key=lambda x: x[1]) for k, g in f["runs"].items()}
             assert all(f["runs"][k]["checkpoint/a/q"].is_virtual for k in f["runs"])
         for k, links in slabs.items():              # every point's state, once: the split of the last run
             assert [lo for _, lo, _ in links] == [0] + [hi for _, _, hi in links[:-1]] and links[-1][2] == 464, k

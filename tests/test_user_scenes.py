@@ -10,7 +10,7 @@ import pytest
 
 from integrators.service import read_run
 from integrators.cli import main as cli_main
-from integrators.service.output import DamagedFile
+from integrators.service.files import DamagedFile
 from integrators.service.scene import SceneError, parse_scene
 
 TABLEAU = '''name = "MyGL2"

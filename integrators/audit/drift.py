@@ -39,7 +39,7 @@ def drift_verdict(t, err, broke, resolution=0.0, law=None):
 def run_drift(cand: Candidate, scene, progress=None):
     """Advance the scene's samples with the candidate; returns t, {'I1/form': e(t)}, breakdown step."""
     from ..service.diagnostics import Diagnostics
-    from ..service.output import relative_error
+    from ..service.statuses import relative_error
     system = scene.system()
     q0 = scene.points(system)
     h = scene.h

@@ -11,7 +11,7 @@ HDF5 format, reading and writing), ``plots``, ``plugins`` (a user's Python calla
 """
 from .api import run, scene_text
 from .driver import PairSummary
-from .output import PairRun, Run, read_run
+from .reader import PairRun, Run, read_run
 from .scene import Scene, SceneError, builtin_scenes, load_scene, parse_scene
 
 __all__ = ["run", "scene_text", "PairSummary", "read_run", "Run", "PairRun", "load_scene", "parse_scene", "Scene", "SceneError",

@@ -81,7 +81,7 @@ def run(scene="default", output=None, *, resume=False, force=False, threads=None
     """
     from ..engine import max_threads
     from .driver import run as run_driver
-    from .output import read_run
+    from .reader import read_run
     from .ranks import communicator
     data, text, origin = _source(scene)
     unknown = sorted(set(overrides) - set(RUN_KEYS))

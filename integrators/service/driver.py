@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import output
+from . import checkpoints, files, output, resumable, statuses
 from ..engine import Engine, MapEngine, State, march, set_threads
 from .clocks import Spent, pair_clock
 from .diagnostics import Diagnostics
@@ -111,8 +111,8 @@ def _check_output(path, resume, force):
         return f"cannot resume: '{path}' does not exist"
     if force and path.exists():          # never replace a file another run is still writing
         try:
-            output.open_file(path).close()
-        except output.BusyFile as exc:
+            files.open_file(path).close()
+        except files.BusyFile as exc:
             return str(exc)
         except (ValueError, OSError):    # damaged or not HDF5: --force is for that
             pass
@@ -137,15 +137,15 @@ def _trial_output(scene, system, q0):
 def _resume_plan(path, scene):
     """Check that ``path`` was written by ``scene`` (or by the same scene with fewer steps)."""
     from .scene import parse_scene, scene_differences
-    text, steps = output.read_scene_text(path)
+    text, steps = resumable.read_scene_text(path)
     try:
         old = parse_scene(text, origin=str(path))
     except ValueError as exc:
-        raise output.DamagedFile(f"cannot resume '{path}': the scene stored in it does not read ({exc})") from None
+        raise files.DamagedFile(f"cannot resume '{path}': the scene stored in it does not read ({exc})") from None
     if steps is not None:
         old = dataclasses.replace(old, steps=steps)
     diff = scene_differences(old, scene)
-    for label, digest in output.read_tableau_digests(path).items():
+    for label, digest in resumable.read_tableau_digests(path).items():
         if label in scene.tableau_files and scene.tableau(label).digest != digest:
             raise ValueError(f"cannot resume '{path}': tableau file '{scene.tableau_files[label]}' ({label}) "
                              "has other coefficients than the run was started with")
@@ -206,7 +206,7 @@ def _preflight(comm, scene, path, resume, force):
         if error is None and resume:
             try:
                 grown_from = _resume_plan(path, scene)
-                output.check_resumable(path, scene)       # read-only: a refused resume changes no byte
+                resumable.check_resumable(path, scene)       # read-only: a refused resume changes no byte
             except ValueError as exc:
                 error = str(exc)
     _agree(comm, error)
@@ -249,12 +249,12 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
         with critical():
             try:
                 if scene.checkpoints == "per-rank":
-                    folder = output.state_dir(path)
+                    folder = checkpoints.state_dir(path)
                     try:
                         folder.mkdir(exist_ok=True)
                     except OSError as exc:
-                        raise output.OutputError(f"cannot make the checkpoint folder '{folder}' (output.checkpoints "
-                                                 f"= \"per-rank\"): {output.plain_error(exc)}") from None
+                        raise files.OutputError(f"cannot make the checkpoint folder '{folder}' (output.checkpoints "
+                                                 f"= \"per-rank\"): {files.plain_error(exc)}") from None
                 if resume and grown_from is not None:
                     # an extension works on a copy, which replaces the file once its first new rows are
                     # written: a failure before that leaves the finished file byte for byte as it was
@@ -264,11 +264,11 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                         shutil.copymode(path, replacing.new)
                     except OSError as exc:
                         replacing.abandon()
-                        raise output.OutputError(f"cannot extend '{path}': its working copy cannot be written "
-                                                 f"({output.plain_error(exc)}); the file is as it was") from None
-                    f = output.reopen(replacing.new, scene)
+                        raise files.OutputError(f"cannot extend '{path}': its working copy cannot be written "
+                                                 f"({files.plain_error(exc)}); the file is as it was") from None
+                    f = resumable.reopen(replacing.new, scene)
                 elif resume:
-                    f = output.reopen(path, scene)
+                    f = resumable.reopen(path, scene)
                 else:
                     target = path
                     if path.exists():
@@ -280,14 +280,14 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                     from .diagnostics import _scalars
                     output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
                 for tab, proj in scene.pairs:
-                    todo.append(output.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
+                    todo.append(resumable.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
                                                     finished_too=grown_from is not None))
                 f.flush()
                 if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
-                    output.prune_slabs(f, path, token)
+                    checkpoints.prune_slabs(f, path, token)
             except (OSError, ValueError) as exc:
-                todo = exc if isinstance(exc, (ValueError, output.OutputError)) else \
-                    output.OutputError(f"cannot write output '{path}': {output.plain_error(exc)}")
+                todo = exc if isinstance(exc, (ValueError, files.OutputError)) else \
+                    files.OutputError(f"cannot write output '{path}': {files.plain_error(exc)}")
                 if f is not None:
                     close_quietly(f)
     # the pairs to run go to every rank without their saved states (a state is every point's:
@@ -316,11 +316,11 @@ def _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, 
     steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in opened.todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or _interactive())))
     try:
-        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED, output.state_dir(path), opened.token)
+        stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED, checkpoints.state_dir(path), opened.token)
         if replacing is not None:      # the old file goes once the new run has written its first rows
             def started():             # ... and with it the old run's checkpoint slabs
                 replacing.commit()
-                output.prune_slabs(f, path, opened.token)
+                checkpoints.prune_slabs(f, path, opened.token)
             stream.writer.started = started
         jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, opened.todo) if job is not None]
         for i, (tab_name, proj, job) in enumerate(jobs):
@@ -340,13 +340,13 @@ def _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, 
         kept = replacing is not None and not replacing.done
         if replacing is not None:
             replacing.abandon()
-        reason = getattr(exc, "reason", None) or output.plain_error(exc)
+        reason = getattr(exc, "reason", None) or files.plain_error(exc)
         if kept:                  # --force or an extension that never replaced the file: it is as it was
-            raise output.OutputError(f"writing '{path}' failed: {reason}; '{path}' is as it was before this run: "
+            raise files.OutputError(f"writing '{path}' failed: {reason}; '{path}' is as it was before this run: "
                                      f"free space, then run {retry} again") from None
-        if isinstance(exc, output.OutputError):
+        if isinstance(exc, files.OutputError):
             raise
-        raise output.OutputError(f"writing '{path}' failed: {reason}; every output before "
+        raise files.OutputError(f"writing '{path}' failed: {reason}; every output before "
                                  "the failure is in the file (free space, then --resume)") from None
     except BaseException:
         if f is not None:
@@ -595,13 +595,13 @@ class _Stream:
 
     def write_slab(self, pair, st, step):
         """output.checkpoints = "per-rank": this rank's points' state at ``step`` as its own file
-        (output.write_slab), and what rank 0 needs to link it: {"slab": [(name, lo, hi)], ...}."""
+        (checkpoints.write_slab), and what rank 0 needs to link it: {"slab": [(name, lo, hi)], ...}."""
         t0 = time.perf_counter()
         lo, hi = pair.block
         piece = {"breakdown_time": st.breakdown_time.copy(), "slab": []}
         if hi > lo:
-            name = output.slab_name(pair.name, step, self.token, lo, hi)
-            output.write_slab(self.slabs, name, st.checkpoint(), self.scene.max_stages)
+            name = checkpoints.slab_name(pair.name, step, self.token, lo, hi)
+            checkpoints.write_slab(self.slabs, name, st.checkpoint(), self.scene.max_stages)
             piece["slab"] = [(name, lo, hi)]
         if self.scene.store_points:
             piece["q"] = st.nearest()[0].copy()
@@ -692,4 +692,4 @@ def finalize(path, scene):
     return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown,
                         laws={k: v.law for k, v in laws.items()}, refined=refined)
             for name, status, broke, errs, wall, unresolved, breakdown, laws, refined in
-            output.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]
+            statuses.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]

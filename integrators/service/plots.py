@@ -22,7 +22,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .output import pair_name, read_run, relative_error  # noqa: E402
+from .output import pair_name  # noqa: E402
+from .reader import read_run  # noqa: E402
+from .statuses import relative_error  # noqa: E402
 
 FLOOR = 1e-17
 

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import output
+from . import checkpoints, output, statuses
 
 
 def concat(parts):
@@ -54,7 +54,7 @@ class Writer:
         else:                    # per-rank checkpoints: every rank has written its slab; link them
             output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None)
             if last.checkpoint:
-                output.link_checkpoint(self.f, pair.g, last.step,
+                checkpoints.link_checkpoint(self.f, pair.g, last.step,
                                        [x for r in batches for x in r[-1][2]["slab"]], self.slabs)
         pair.breakdown_written = bt
         if self.started is not None:
@@ -74,7 +74,7 @@ class Writer:
         clock["per_rank"] = clocks
         self.timings[pair.name] = clock
         output.wall_clock(pair.g, pair.wall())
-        output.close_pair(pair.g, self.scene.n_outputs, self.threshold, self.slabs)
+        statuses.close_pair(pair.g, self.scene.n_outputs, self.threshold, self.slabs)
         self.f.flush()
         return clocks
 
