@@ -147,7 +147,7 @@ def _printable(text) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
-SHORT_SERIES = 200      # outputs below which bounded and random walk are not told apart (docs/benchmarks.md)
+SHORT_SERIES = 200      # outputs below which bounded and random walk are not told apart (docs/growth.md)
 
 
 def _print_summary(summaries, out, n_outputs=None):
@@ -193,7 +193,7 @@ def _print_summary(summaries, out, n_outputs=None):
         notes.append(f"  growth laws from {n_outputs} outputs: round-off, linear and faster hold (94-100 % right on "
                      f"synthetic series this short), but bounded and random walk are told apart only from about "
                      f"{SHORT_SERIES} outputs (32-50 % right; 4-9 % of bounded series read as linear): "
-                     "more outputs for those verdicts (docs/benchmarks.md, Growth laws)")
+                     "more outputs for those verdicts (docs/growth.md)")
     if notes:
         print("\n".join(notes))
     bad = [s for s in summaries if s.status != "ok"]

@@ -641,7 +641,7 @@ def _commit(state, idx, ok, new):
     state.steps[good] += 1
 
 
-CHUNK = 20000    # points advanced together; larger batches spill out of the cache (docs/benchmarks.md)
+CHUNK = 20000    # points advanced together; larger batches spill out of the cache (docs/scaling.md, "Throughput at scale")
 
 
 def advance(stepper: Stepper, state: State, t_next: float, chunk: int = CHUNK):

@@ -31,7 +31,7 @@ This module makes that judgement a number::
 A series with non-finite values (a broken-down set) gets the law of its finite prefix; one with
 fewer than ``MIN_WINDOWS`` usable windows gets ``undetermined``.  The thresholds are validated on
 5,000 synthetic series and on the project's known results (scripts/growth_laws.py,
-docs/benchmarks.md "Growth laws").
+docs/growth.md).
 """
 from __future__ import annotations
 

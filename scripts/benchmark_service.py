@@ -1,4 +1,4 @@
-"""Service benchmarks (docs/benchmarks.md): what skipping saves, and MPI scaling.
+"""Service benchmarks (docs/scaling.md): what skipping saves, and MPI scaling.
 
     python scripts/benchmark_service.py [--steps 100] [--out docs/figures/benchmark_service.json]
 

@@ -1,5 +1,5 @@
 """Which details move the step at which an unprojected even-stage Gauss–Legendre run breaks down on
-Lotka–Volterra (docs/benchmarks.md, "Why GLRK2 breaks down at step 74,564 and not 250,000").
+Lotka–Volterra (docs/stability.md, "Why GLRK2 breaks down at step 74,564 and not 250,000").
 
     python scripts/breakdown_sensitivity.py [--pairs GLRK2 GLRK4] [--steps 1000000] [--json out.json]
 

@@ -11,7 +11,7 @@
   - linear: a·t + b·sin(ωt) with b up to 0.3 × a·T, noise 0–30 %;
   - faster: ε·(exp(λt) − 1) with λT from 4 to 20, or a·t³ (+ oscillation); noise 0–30 %.
   Each series has 200–4,000 samples at equal times.  The confusion matrix (rows: the law drawn,
-  columns: the law found) goes to docs/benchmarks.md.
+  columns: the law found) goes to docs/growth.md.
 * **Known results** from the project's stored runs (no rerun needed): the stability campaign's
   energy envelopes (docs/figures/stability/*.jsonl, 40 log windows each), the energy drift study
   (docs/figures/energy_drift.json, 10 interval maxima) and the paper scene's invariants on the

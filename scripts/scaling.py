@@ -3,7 +3,7 @@
     python scripts/scaling.py measure [--steps 1000] [--hybrid]   # ~17 min on 2 cores: docs/figures/scaling.json
     python scripts/scaling.py measure --again 2x1                 # one run again, the rest of the file kept
     python scripts/scaling.py measure --again checkpoints         # per-rank checkpoints: costs, 2 ranks side by side
-    python scripts/scaling.py predict                 # the model: tables for docs/benchmarks.md and a PNG
+    python scripts/scaling.py predict                 # the model: tables for docs/scaling.md and a PNG
 
 measure:
   A. the paper scene (paper_poincare: loop 2,000, surface 100 × 100, 15 pairs; ``--steps`` steps),
@@ -29,7 +29,7 @@ predict also runs the batch-by-batch model (:func:`predict_schedule`): the drive
 itself (batch sizes with the cap of driver.turns, each batch's set tasks on the ranks the rotation
 gives them, rank 0's rows and checkpoints), for the driver as built, with checkpoints written by every rank
 (output.checkpoints = "per-rank", costs from ``--again checkpoints``) and for a design not built
-(a set's task split over a group of ranks), strong and weak scaling.  That is the model docs/benchmarks.md quotes now; the even-spread one above is kept for
+(a set's task split over a group of ranks), strong and weak scaling.  That is the model docs/scaling.md quotes now; the even-spread one above is kept for
 the record of how the first predictions were made.
 """
 import argparse
@@ -510,7 +510,7 @@ def oversubscribed(model, pair_costs, startup, factor):
 
 def schedule_tables(model, pair_costs, startup, steps, every, res):
     """The batch-by-batch model (:func:`predict_schedule`): validation, strong scaling for each
-    design, weak scaling; printed as Markdown tables for docs/benchmarks.md."""
+    design, weak scaling; printed as Markdown tables for docs/scaling.md."""
     print("| ranks | measured wall [s] | predicted, batch by batch [s] |\n|---:|---:|---:|")
     for label, r in (("1x1", 1), ("2x1", 2)):
         walls = [e[label]["wall"] for e in res.get("earlier", []) if label in e      # the runs since this

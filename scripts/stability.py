@@ -1,4 +1,4 @@
-"""Long-time stability campaign of sec:numerical_experiments (docs/benchmarks.md, "Stability").
+"""Long-time stability campaign of sec:numerical_experiments (docs/stability.md).
 
     python scripts/stability.py run  --case lotka_volterra --steps 1000000 [--pairs GLRK1:none ...]
                                      [--shard 0/2] [--out docs/figures/stability/a.jsonl]

@@ -1,10 +1,10 @@
-"""Work–precision: wall time against error, VPRK pairs against scipy (docs/benchmarks.md).
+"""Work–precision: wall time against error, VPRK pairs against scipy (docs/work_precision.md).
 
     python scripts/work_precision.py trajectory [--systems ...] [--points 16]
                                          # docs/figures/work_precision/<system>.json (<system>_1.json: 1 point)
     python scripts/work_precision.py invariants [--steps 10000]   # docs/figures/work_precision/invariants.json
     python scripts/work_precision.py plot                         # docs/figures/work_precision*.png
-    python scripts/work_precision.py table                        # the markdown tables of docs/benchmarks.md
+    python scripts/work_precision.py table                        # the markdown tables of docs/work_precision.md
 
 trajectory
     For each system, 16 points near the paper's initial condition, advanced to T = 64 h₀ (h₀ the

@@ -69,7 +69,7 @@ def test_fitted_law_passes_through_the_window_maxima():
 
 def test_synthetic_populations_are_classified_as_validated():
     """200 series of each law, drawn as scripts/growth_laws.py draws them (fixed seed): the share
-    classified right is at least what docs/benchmarks.md reports for 1,000 each, less a margin for
+    classified right is at least what docs/growth.md reports for 1,000 each, less a margin for
     the smaller sample (reported there: 100, 90, 65, 97, 99 %)."""
     import growth_laws
     M = growth_laws.confusion(200, seed=7)

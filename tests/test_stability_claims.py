@@ -1,4 +1,4 @@
-"""The cheap end of the stability campaign (scripts/stability.py, docs/benchmarks.md "Stability").
+"""The cheap end of the stability campaign (scripts/stability.py, docs/stability.md).
 
 Behaviours sec:app_lotka_volterra_2d reports for the Lotka–Volterra model at q0 = (1, 1) that a
 short run can check: the Lobatto IIIA–IIIB pair without projection breaks down after tens of

@@ -221,7 +221,7 @@ def test_a_resolved_scene_is_ok_and_exits_0(tmp_path):
                                   "paper_poincare", "massless_charged_particle", "lotka_volterra_4d",
                                   "guiding_centre_solovev", "charged_particle_tokamak"])
 def test_builtin_scenes_start_resolved(name):
-    """Every shipped scene's sets resolve their invariants at t = 0 (the whole run: docs/benchmarks.md)."""
+    """Every shipped scene's sets resolve their invariants at t = 0 (the whole run: docs/scenes.md)."""
     from invariants import UNDER_RESOLVED
     from invariants.spectral import loop_tail, surface_tail
     sc = load_scene(name)

@@ -23,7 +23,7 @@ from numba import njit
 from ..simd import _at
 
 # relative cost of one form per sample point, measured on guiding_centre_symmetric (loop of 2,000,
-# surface of 100 × 100; docs/benchmarks.md): only the ratios matter, for the assignment of tasks
+# surface of 100 × 100; docs/scaling.md): only the ratios matter, for the assignment of tasks
 COST_PER_POINT = {("I1", "canonical"): 0.25, ("I1", "noncanonical"): 0.20, ("I1", "corrected"): 0.63,
                   ("I2", "canonical"): 1.85, ("I2", "noncanonical"): 1.32, ("I2", "corrected"): 3.68}
 

@@ -19,8 +19,8 @@ Who advances the new points: the rank that computes the set's invariants for an 
 set's task owner for that batch, tasks.Tasks.assign) keeps its own copy of each level's new
 points and moves it forward to the outputs it is given (they come in increasing order on a
 rank).  A refining set's tasks stay on one rank for a whole pair (tasks.Tasks.assign), so on any
-number of ranks that is one catch-up and one advance a pair, done by that rank (docs/benchmarks.md,
-"Self-refining sample sets").
+number of ranks that is one catch-up and one advance a pair, done by that rank (docs/scenes.md,
+"Self-refining sample sets: what the catch-up costs").
 """
 from __future__ import annotations
 

@@ -64,7 +64,7 @@ class Tasks:
         values come, not how many outputs a second the ranks get through, and batches of unequal
         size do not pile the large set on some ranks (turning the owners by batch index did: with
         two batches a pair, a big and a small one, the big ones' surface tasks went to every other
-        rank; docs/benchmarks.md, "Distributed output").  A set that refines itself stays on one
+        rank; docs/scaling.md, "Distributed output").  A set that refines itself stays on one
         rank for the whole pair, turning by one rank a pair: its new points are advanced by the
         rank that takes its tasks (integrators.service.refine), once a pair rather than once per
         rank.  Called once per batch, in the same order on every rank."""
@@ -107,7 +107,7 @@ class Tasks:
         """This rank's parts of set ``s`` over a batch's outputs ``held``, as the four arrays (q, p, λ,
         live) each with the outputs along a first axis: what goes to the set's owner.  A few large
         arrays travel 3-5× faster than four small ones an output (transport: mpi4py pkl5 sends
-        large arrays as their own buffers; docs/benchmarks.md); the owner takes output i as
+        large arrays as their own buffers; docs/scaling.md); the owner takes output i as
         ``a[i]`` of each, the same values."""
         return tuple(np.stack([x.parts[s][c] for x in held]) for c in range(4))
 
