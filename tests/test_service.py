@@ -116,7 +116,7 @@ def test_run_writes_the_spec_layout_and_the_papers_findings(tmp_path):
     scene = parse_scene(SMALL)
     out = tmp_path / "small.h5"
     summaries = driver.run(scene, out, progress=False)
-    assert [s.pair for s in summaries] == [f"{t}-{p}" for t, p in scene.pairs]
+    assert [s.pair for s in summaries] == [p.name for p in scene.pairs]
     with h5py.File(out, "r") as f:
         assert f.attrs["format"] == "poincare/2" and f.attrs["scene"] == SMALL
         g = f["runs/GLRK1-symplectic"]

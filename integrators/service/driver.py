@@ -279,8 +279,8 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                 if "energy" in scene.diagnostics:       # where a relative energy error has no scale
                     from .diagnostics import _scalars
                     output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
-                for tab, proj in scene.pairs:
-                    todo.append(resumable.restart_pair(f, output.pair_name(tab, proj), scene.output_every,
+                for pair in scene.pairs:
+                    todo.append(resumable.restart_pair(f, pair.name, scene.output_every,
                                                     finished_too=grown_from is not None))
                 f.flush()
                 if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
@@ -322,15 +322,15 @@ def _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, 
                 replacing.commit()
                 checkpoints.prune_slabs(f, path, opened.token)
             stream.writer.started = started
-        jobs = [(tab, proj, job) for (tab, proj), job in zip(scene.pairs, opened.todo) if job is not None]
-        for i, (tab_name, proj, job) in enumerate(jobs):
+        jobs = [(pair, job) for pair, job in zip(scene.pairs, opened.todo) if job is not None]
+        for i, (pair, job) in enumerate(jobs):
             check()
-            _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, i == 0, i + 1 < len(jobs), bar, check)
+            _run_pair(comm, stream, scene, system, q0, pair, job, i == 0, i + 1 < len(jobs), bar, check)
         w0 = time.perf_counter()
         stream.drain()
         ends = comm.gather(time.perf_counter() - w0, root=0)
         if rank == 0 and jobs:               # what each rank spent finishing the last batches, with the last pair
-            last = timings[output.pair_name(*jobs[-1][:2])]
+            last = timings[jobs[-1][0].name]
             for c, s in zip(last["per_rank"], ends):
                 c["wait_end"] = s
         comm.Barrier()
@@ -372,14 +372,14 @@ def _finish(path, scene, opened, timings) -> list:
     return summaries
 
 
-def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_next, bar, check):
+def _run_pair(comm, stream, scene, system, q0, pair_, job, first, has_next, bar, check):
     """Advance one pair on this rank from its start (or checkpoint) to scene.steps, handing each
     batch of outputs to ``stream``; the pair's tasks and rows may finish during the next pair."""
     rank, size = comm.rank, comm.size
     n, h = q0.shape[0], scene.h
-    name = output.pair_name(tab_name, proj)
+    name = pair_.name
     start_step, saved = job
-    make_engine, s_tab = _engine_maker(scene, system, tab_name, proj)
+    make_engine, s_tab = _engine_maker(scene, system, pair_)
     engine = make_engine()
     clock = pair_clock()
     w0 = time.perf_counter()
@@ -444,14 +444,14 @@ def _run_pair(comm, stream, scene, system, q0, tab_name, proj, job, first, has_n
     pair.t_end = time.perf_counter()
 
 
-def _engine_maker(scene, system, tab_name, proj):
+def _engine_maker(scene, system, pair):
     """(a function making a fresh engine of the pair, its stage count s): the compiled engine in the
     scene's precision, or a user's step map (run.step_maps) behind the same interface."""
     h = scene.h
-    if proj == "map":
-        return (lambda: MapEngine(scene.step_map(tab_name), system, h, tab_name)), 1
-    return (lambda: Engine(system, scene.tableau(tab_name), proj, h, precision=scene.precision)), \
-        scene.tableau(tab_name).s
+    if pair.step_map:
+        return (lambda: MapEngine(scene.step_map(pair.label), system, h, pair.label)), 1
+    return (lambda: Engine(system, scene.tableau(pair.label), pair.projection, h, precision=scene.precision)), \
+        scene.tableau(pair.label).s
 
 
 def _starting_state(comm, engine, q0, blocks, saved, s_tab, h):
@@ -692,4 +692,4 @@ def finalize(path, scene):
     return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown,
                         laws={k: v.law for k, v in laws.items()}, refined=refined)
             for name, status, broke, errs, wall, unresolved, breakdown, laws, refined in
-            statuses.finish(path, [output.pair_name(t, p) for t, p in scene.pairs], scene.n_outputs)]
+            statuses.finish(path, [p.name for p in scene.pairs], scene.n_outputs)]

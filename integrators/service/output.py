@@ -112,8 +112,8 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
     if scene.tableau_files:                 # a resume must find the same coefficients, not only the name
         f.attrs["tableau_digests"] = json.dumps({t: scene.tableau(t).digest for t in scene.tableau_files})
     runs = f.create_group("runs")
-    for tab, proj in scene.pairs:
-        g = runs.create_group(pair_name(tab, proj))
+    for pair in scene.pairs:
+        g = runs.create_group(pair.name)
         g.attrs["status"] = "pending"
         g.attrs["wall_time"] = 0.0
         _series(g, "t")

@@ -168,7 +168,7 @@ class Run:
         try:
             from .scene import parse_scene
             sc = parse_scene(self.scene)
-            maps = [t for t, p in sc.pairs if p == "map"]
+            maps = [p.label for p in sc.pairs if p.step_map]
             return list(sc.tableaus) + maps, list(sc.projections) + (["map"] if maps else [])
         except ValueError:                 # the scene no longer parses here (a user file moved): by name
             tabs, projs = [], []

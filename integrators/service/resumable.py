@@ -9,7 +9,7 @@ import numpy as np
 
 from .files import BusyFile, DamagedFile, OutputError, check_size, is_lock_error, open_file, plain_error, size_limit
 from .checkpoints import STATE_FIELDS, read_checkpoint, slot_files, state_dir, truncate
-from .output import FINISHED, FORMAT, STATUSES, pair_name
+from .output import FINISHED, FORMAT, STATUSES
 
 def read_scene_text(path):
     """(scene TOML, steps in force) stored in a run file (DamagedFile / BusyFile / ValueError in one line)."""
@@ -61,8 +61,8 @@ def _check_pairs(f, runs, scene, limit, State):
     def damaged(what):
         return DamagedFile(f"'{path}' is damaged: {what}; it cannot be resumed (start again with --force)")
 
-    for tab, proj in scene.pairs:
-        name = pair_name(tab, proj)
+    for pair in scene.pairs:
+        name = pair.name
         if name not in runs:
             raise damaged(f"the pair {name} is missing")
         g = runs[name]

@@ -76,6 +76,7 @@ import dataclasses
 import math
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -183,6 +184,24 @@ def _levels(spec) -> int:
     return level
 
 
+class Pair(NamedTuple):
+    """One run of a scene: a tableau (by its label) with a projection, or a user's step map
+    (run.step_maps; ``projection`` None, ``label`` the function's name)."""
+
+    label: str
+    projection: str | None
+
+    @property
+    def step_map(self) -> bool:
+        return self.projection is None
+
+    @property
+    def name(self) -> str:
+        """Its group in the run file: 'GLRK2-symmetric', a step map 'rk4-map' (output.pair_name)."""
+        from .output import pair_name
+        return pair_name(self.label, "map" if self.projection is None else self.projection)
+
+
 @dataclasses.dataclass(frozen=True)
 class Scene:
     """A validated scene (immutable).  ``text`` is the TOML it came from."""
@@ -218,10 +237,10 @@ class Scene:
         return max([self.tableau(t).s for t in self.tableaus] + [1])
 
     @property
-    def pairs(self):
-        """(tableau, projection) pairs in run order; a step map is (its function's name, 'map')."""
-        return [(t, p) for t in self.tableaus for p in self.projections] + \
-            [(step_map_label(m), "map") for m in self.step_maps]
+    def pairs(self) -> list:
+        """The scene's :class:`Pair` s in run order: every (tableau, projection), then the step maps."""
+        return [Pair(t, p) for t in self.tableaus for p in self.projections] + \
+            [Pair(step_map_label(m), None) for m in self.step_maps]
 
     def step_map(self, label):
         """The callable of the step map whose pair label is ``label``."""

@@ -18,7 +18,6 @@ import dataclasses
 
 import numpy as np
 
-from . import output
 from .diagnostics import COST_PER_POINT, assign_sets
 from .refine import refined_values
 
@@ -52,7 +51,7 @@ class Tasks:
         self.scene, self.size, self.threshold = scene, size, threshold
         self.first = assign_sets(scene, size)          # a refining set's rank in the run's first pair
         self.refining = {spec.invariant for spec, _ in scene.sample_sets if spec.levels}
-        self.order = {output.pair_name(t, p): k for k, (t, p) in enumerate(scene.pairs)}
+        self.order = {p.name: k for k, p in enumerate(scene.pairs)}
         self.cost = {spec.invariant: sum(COST_PER_POINT[(spec.invariant, f)] for f in scene.forms) * spec.count
                      for spec, _ in scene.sample_sets}  # one output's task, in the estimates' units
         self.load = np.zeros(size)                       # task work given to each rank so far
