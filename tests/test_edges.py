@@ -353,6 +353,7 @@ def test_a_dataset_that_claims_petabytes_is_one_line_and_resume_changes_no_byte(
     assert (tmp_path / "lv.h5").read_bytes() == before
 
 
+@pytest.mark.slow
 def test_a_few_flipped_bits_never_give_a_traceback_or_change_a_refused_file():
     script = Path(__file__).parents[1] / "scripts" / "damaged_files.py"
     r = subprocess.run([sys.executable, str(script), "--flips", "4", "--seed", "3", "--below", "40000",

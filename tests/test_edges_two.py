@@ -183,6 +183,7 @@ def test_plot_of_a_run_stopped_before_any_row_with_points_stored(tmp_path):
 
 # -- 3. a truncated file is damaged, not locked ----------------------------------------------------
 
+@pytest.mark.slow
 def test_a_truncated_file_is_called_damaged_not_locked(tmp_path):
     out = tmp_path / "lv.h5"
     driver.run(parse_scene(LV), out, progress=False)

@@ -52,6 +52,7 @@ def test_paper_loop_and_surface_at_t0_closed_form():
     assert rel(I2.value, exact2) <= 1e-13
 
 
+@pytest.mark.slow
 def test_nonplanar_loop_on_point_vortices_closed_form():
     pv = integrators.system("point_vortices")
     c, s = sympy.cos(2 * sympy.pi * t_), sympy.sin(2 * sympy.pi * t_)

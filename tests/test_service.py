@@ -230,6 +230,7 @@ def poincare(*args, n=None, **kw):
     return subprocess.run(cmd, capture_output=True, text=True, timeout=600, **kw)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_results_are_bitwise_identical_for_1_2_3_5_8_and_16_ranks(tmp_path):
     """Every dataset of the file, invariants and checkpoints included, is the same bits for any rank

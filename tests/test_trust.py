@@ -280,6 +280,7 @@ def _wait_for_rows(path, pair, rows, proc, limit=120):
     return False
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signame,code", [("SIGTERM", 143), ("SIGINT", 130)])
 def test_a_signal_flushes_says_how_to_resume_and_resume_finishes(tmp_path, signame, code):
     import signal
@@ -320,6 +321,7 @@ def test_sigterm_under_mpiexec_stops_every_rank(tmp_path):
         assert f["runs/GLRK2-symmetric/t"].shape[0] >= 5
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 @pytest.mark.parametrize("checkpoints", ["in-file", "per-rank"])
 def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path, checkpoints):
@@ -475,6 +477,7 @@ def test_resume_compares_parsed_scenes_and_lists_the_keys_that_differ(tmp_path, 
     assert err.count("\n") == 1 and "run.projections, run.h" in err
 
 
+@pytest.mark.slow
 def test_a_finished_run_extended_to_more_steps_equals_one_longer_run(tmp_path):
     short, longer = tmp_path / "short.toml", tmp_path / "long.toml"
     short.write_text(GC)
