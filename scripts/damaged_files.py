@@ -8,7 +8,7 @@ must be called damaged, never locked or busy (HDF5's message for a bad superbloc
     python scripts/damaged_files.py --flips 0 --truncate     # every 512 bytes up to the first dataset, and a few beyond
 
 Prints one line per flip or cut and a summary; exits 1 if any broke a rule.  (The test suite runs a
-few of the same checks: tests/test_edges.py, tests/test_edges_two.py.)"""
+few of the same checks: tests/test_files.py.)"""
 from __future__ import annotations
 
 import argparse

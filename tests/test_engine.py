@@ -138,7 +138,7 @@ def test_the_generated_code_is_cached_on_disk_keyed_by_the_expressions(tmp_path)
 def test_hostile_symbol_names_in_the_compiled_code():
     """Coordinates q, p, out, np and parameters e, pi, sqrt, log, exp, lambda mean those symbols in the
     generated numba code too: the compiled step agrees with the numpy engine, whose generated code
-    tests/test_trust.py checks against hand values."""
+    tests/test_scene.py checks against hand values."""
     q, p, out, np_ = sympy.symbols("q p out np")
     e, pi, sq, lg, ex, lam = sympy.symbols("e pi sqrt log exp lambda")
     theta = [-p * e / 2, q * pi / 2, -np_ * sq, out * lg]

@@ -1,4 +1,4 @@
-"""Adversarial inputs (issue: stability stress): nothing crashes, bad points break down alone."""
+"""Breakdowns and degenerate inputs (integrators/engine.py, kernel.py): adversarial inputs break nothing and bad points break down alone (docs/stability.md)."""
 import h5py
 import numpy as np
 import pytest

@@ -1,0 +1,281 @@
+"""What the tests of scenes, files, resumes and the command line share: the `poincare` command run
+as a process, small scenes, and readers of run files (moved here from the files that grew by issue)."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import sympy
+
+import integrators
+from integrators.cli import main as cli_main
+from integrators.expressions import ExpressionError, parse_expression, parse_number
+from integrators.service import driver
+from integrators.service import driver, files, output
+from integrators.service.checkpoints import slot_files
+from integrators.service.scene import SceneError, load_scene, parse_scene
+from integrators.service.scene import SceneError, parse_scene
+from integrators.tableaus import tableau, tableau_from_file
+
+
+POINTS = Path(__file__).parent
+
+
+BIN = Path(sys.executable).parent
+
+
+LV_PAIRS = """
+name = "lv"
+[system]
+name = "lotka_volterra_2d"
+[loop]
+shape = "ellipse"
+points = 64
+params = { d = 2, center = [1.0, 1.0], radii = [0.1, 0.1] }
+[run]
+tableaus = ["GLRK1", "GLRK2"]
+projections = ["none", "standard"]
+h = 0.1
+steps = 20
+output_every = 5
+diagnostics = ["energy", "constraint"]
+"""
+
+
+GC = """
+name = "gc"
+[system]
+name = "guiding_centre_symmetric"
+[loop]
+points = 64
+[surface]
+n_sigma = 20
+n_tau = 20
+[run]
+tableaus = ["GLRK2"]
+projections = ["symmetric", "symplectic"]
+h = 10.0
+steps = 40
+output_every = 4
+forms = ["canonical", "noncanonical", "corrected"]
+"""
+
+
+def _wait_for_rows(path, pair, rows, proc, limit=120):
+    import time
+    deadline = time.time() + limit
+    while time.time() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+        try:
+            with h5py.File(path, "r", locking=False) as f:
+                if f[f"runs/{pair}/t"].shape[0] >= rows:
+                    return True
+        except (OSError, KeyError, RuntimeError):
+            pass
+    return False
+
+
+def _flip_chunk(path, dataset):
+    """Overwrite the first stored chunk of a dataset with garbage bytes (a damaged disk block)."""
+    with h5py.File(path, "r") as f:
+        info = f[dataset].id.get_chunk_info(0)
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset + 8)
+        fh.write(b"\x13\x37" * 8)
+
+
+def _dump(path, skip=("wall_clock", "checkpoint")):
+    out = {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and not any(s in name for s in skip):
+                out[name] = obj[...]
+        f.visititems(visit)
+        out["status"] = {k: f["runs"][k].attrs["status"] for k in f["runs"]}
+    return out
+
+
+SHAPES_CIRCLE = '''
+import numpy as np
+
+def circle(tau, r=0.3):
+    return np.stack([r * np.cos(2 * np.pi * tau), r * np.sin(2 * np.pi * tau), 0 * tau, 0.5 + 0 * tau], axis=-1)
+
+def boom(tau):
+    raise RuntimeError("shape exploded")
+'''
+
+
+LV = """
+name = "lv"
+[system]
+name = "lotka_volterra_2d"
+[loop]
+shape = "ellipse"
+points = 64
+params = { d = 2, center = [1.0, 1.0], radii = [0.1, 0.1] }
+[run]
+tableaus = ["GLRK2"]
+projections = ["none", "symmetric"]
+h = 0.1
+steps = 20
+output_every = 10
+diagnostics = ["energy", "constraint"]
+[output]
+checkpoint_seconds = 0.0
+"""
+
+
+def scene(steps, every=10, text=LV):
+    return parse_scene(text.replace("steps = 20", f"steps = {steps}").replace("output_every = 10",
+                                                                              f"output_every = {every}"))
+
+
+def dump(path):
+    """Every dataset and status of a run file, checkpoints included (not the wall clocks)."""
+    out = {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and "wall_clock" not in name:
+                out[name] = obj[...]
+        f.visititems(visit)
+        out["status"] = {k: str(f["runs"][k].attrs["status"]) for k in f["runs"]}
+    return out
+
+
+def assert_same(a, b):
+    da, db = dump(a), dump(b)
+    assert da.keys() == db.keys()
+    differ = [k for k in da if not (da[k] == db[k] if k == "status" else np.array_equal(da[k], db[k]))]
+    assert not differ, differ
+
+
+def poincare(*args, cwd=None, n=None, env=None, **kw):
+    cmd = [str(BIN / "poincare"), *args]
+    if n:
+        cmd = [str(BIN / "mpiexec"), "-n", str(n), *cmd]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=cwd,
+                          env=None if env is None else {**os.environ, **env}, **kw)
+
+
+USER = """
+name = "osc"
+[system]
+name = "oscillator"
+coordinates = ["x", "y"]
+theta = ["-y/2", "x/2"]
+H = "x^2 + y^2"
+[loop]
+shape = "ellipse"
+points = 32
+params = { d = 2, center = [0.5, 0.5], radii = [0.05, 0.05] }
+[run]
+tableaus = ["GLRK1"]
+projections = ["none"]
+h = 0.1
+steps = 20
+output_every = 10
+"""
+
+
+def one_line(r, *words):
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert all(w in r.stderr for w in words), r.stderr
+
+
+SHAPES_TAU = '''
+import numpy as np
+
+def circle(tau, r=0.1, cx=0.5, cy=0.5):
+    assert tau.shape == (32,) and tau[0] == 0.0 and tau[-1] == 31 / 32
+    return np.stack([cx + r * np.cos(2 * np.pi * tau), cy + r * np.sin(2 * np.pi * tau)], axis=1)
+
+def by_count(N):
+    return np.zeros((N, 2))
+'''
+
+
+PARTIAL = LV.replace('projections = ["none", "symmetric"]', 'projections = ["none"]').replace(
+    "h = 0.1", "h = 0.3").replace("center = [1.0, 1.0], radii = [0.1, 0.1]", "center = [0.35, 0.35], radii = [0.3, 0.3]")
+
+
+def _claim_petabytes(path):
+    """Set the first dimension of one series dataset's dataspace (5 rows, unlimited) to 2^50 + 5."""
+    import struct
+    data = bytearray(path.read_bytes())
+    pattern = struct.pack("<Q", 5) + b"\xff" * 8
+    k = data.index(pattern)
+    data[k + 6] = 0x04
+    path.write_bytes(bytes(data))
+
+
+MAPS = """
+import os, sys, time
+calls = [0]
+
+def stuck(q, p, lam, h, system):
+    calls[0] += 1
+    if calls[0] > 30 and os.environ.get("STUCK_RANK", os.environ.get("PMI_RANK", "0")) == os.environ.get("PMI_RANK", "0"):
+        if os.environ.get("SPIN"):
+            while True:
+                pass
+        time.sleep(10**6)
+    return q, p, lam
+
+def bye(q, p, lam, h, system):
+    sys.exit(0)
+
+def shape_bye(tau):
+    sys.exit(3)
+"""
+
+
+STUCK = USER.replace('tableaus = ["GLRK1"]\nprojections = ["none"]', 'step_maps = ["maps.py:stuck"]') \
+    .replace("steps = 20", "steps = 100") + "[output]\ncheckpoint_seconds = 0.0\n"
+
+
+def _rows(path, pair):
+    with h5py.File(path, "r", locking=False) as f:
+        return f[f"runs/{pair}/t"].shape[0]
+
+
+def _wait_rows(path, pair, rows, proc, limit=120):
+    deadline = time.time() + limit
+    while time.time() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+        try:
+            if _rows(path, pair) >= rows:
+                return True
+        except (OSError, KeyError, RuntimeError):
+            pass
+    return False
+
+
+OSC = USER.replace('H = "x^2 + y^2"', 'H = "x^2 + y^2"')
+
+
+def _limited(extra):
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (extra, extra))
+    return limit
+
+
+def _finished_then_on_a_full_disk(tmp_path, room, *args):
+    """A finished run of LV in tmp_path/lv.h5, then ``poincare run … args`` with ``room`` bytes to
+    grow beyond the file's size; returns (the file's bytes before, the second command's result)."""
+    (tmp_path / "lv.toml").write_text(LV)
+    out = tmp_path / "lv.h5"
+    assert poincare("run", "lv.toml", "-o", "lv.h5", "-q", cwd=tmp_path).returncode == 0
+    before = out.read_bytes()
+    r = subprocess.run([str(BIN / "poincare"), "run", "lv.toml", "-o", "lv.h5", *args, "--steps", "4000", "-q"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                       preexec_fn=_limited(len(before) + room))
+    return before, r
