@@ -21,6 +21,8 @@ from integrators.service.checkpoints import slot_files
 from integrators.service.scene import SceneError, load_scene, parse_scene
 from integrators.service.scene import SceneError, parse_scene
 from integrators.tableaus import tableau, tableau_from_file
+import shutil
+from integrators.service.scene import SceneError, builtin_scenes, load_scene, parse_scene
 
 
 POINTS = Path(__file__).parent
@@ -279,3 +281,82 @@ def _finished_then_on_a_full_disk(tmp_path, room, *args):
                        cwd=tmp_path, capture_output=True, text=True, timeout=300,
                        preexec_fn=_limited(len(before) + room))
     return before, r
+
+
+
+SMALL = """
+name = "small"
+[system]
+name = "guiding_centre_symmetric"
+[loop]
+points = 64
+[surface]
+n_sigma = 20
+n_tau = 20
+[run]
+tableaus = ["GLRK1", "GLRK2"]
+projections = ["none", "symmetric", "symplectic"]
+h = 10.0
+steps = 40
+output_every = 4
+forms = ["canonical", "noncanonical", "corrected"]
+"""
+
+
+def edit(text, old, new):
+    assert old in text
+    return text.replace(old, new)
+
+
+def dump_file(path, skip=("wall_clock",)):
+    out = {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and not any(s in name for s in skip):
+                out[name] = obj[()]
+        f.visititems(visit)
+        out["status"] = {k: f["runs"][k].attrs["status"] for k in f["runs"]}
+    return out
+
+
+def same(a, b):
+    return set(a) == set(b) and all(
+        (a[k] == b[k]) if k == "status" else np.array_equal(a[k], b[k]) for k in a)
+
+
+def stop_at_output_8(scene, path, monkeypatch):
+    """Run ``scene`` into ``path`` with a state every 3rd output and rows every 2nd, stopped (as by
+    Ctrl-C) after output 8 of pair GLRK2-none: its rows end at 8, its newest state is at 6."""
+    monkeypatch.setattr(driver, "_cadence", lambda seconds_per_output, checkpoint_seconds: 3)
+    monkeypatch.setattr(driver, "_batch", lambda seconds_per_output, points: 2)
+
+    def stop(pair, step):
+        if pair == "GLRK2-none" and step == 32:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        driver.run(scene, path, progress=False, after_output=stop)
+
+
+JITTER = """
+import random, sys, time
+from integrators.service import driver
+from integrators.service.ranks import communicator
+from integrators.service.scene import load_scene
+comm = communicator()
+rank_slowest = int(sys.argv[3])
+slow = 0.0 if comm.size == 1 else 0.012 * (1 + (comm.rank - rank_slowest) % comm.size)
+rng = random.Random(comm.rank)
+march = driver.march
+
+def uneven(engine, st, start, stop, every, on_output, *args, **kw):
+    def late(step):                   # this rank reaches its outputs late by a random 0-slow s
+        time.sleep(rng.uniform(0.0, slow))
+        on_output(step)
+    return march(engine, st, start, stop, every, late, *args, **kw)
+
+driver.march = uneven
+driver._batch = lambda seconds_per_output, points: 2
+driver._cadence = lambda seconds_per_output, checkpoint_seconds: 3
+driver.run(load_scene(sys.argv[1]), sys.argv[2], progress=False)
+"""

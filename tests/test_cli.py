@@ -21,8 +21,8 @@ from integrators.service.checkpoints import slot_files
 from integrators.service.scene import SceneError, load_scene, parse_scene
 from integrators.service.scene import SceneError, parse_scene
 from integrators.tableaus import tableau, tableau_from_file
+from helpers import BIN, GC, LV, LV_PAIRS, MAPS, OSC, PARTIAL, POINTS, SHAPES_TAU, SMALL, STUCK, USER, _wait_for_rows, _wait_rows, edit, one_line, poincare, scene
 
-from helpers import BIN, GC, LV, LV_PAIRS, MAPS, OSC, PARTIAL, POINTS, SHAPES_TAU, STUCK, USER, _wait_for_rows, _wait_rows, one_line, poincare, scene
 
 
 def test_the_audit_cli_refuses_a_code_tableau_in_one_line(tmp_path, monkeypatch, capsys):
@@ -407,3 +407,34 @@ def test_an_audit_verdict_near_the_round_off_floor_says_so():
     near = [line for line in lines if "I1/corrected" in line][0]
     far = [line for line in lines if "I2/corrected" in line][0]
     assert "growing (α = 2.54); near the round-off floor" in near and "near" not in far
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["run", "no-such-scene"], "neither a file nor a built-in scene"),
+    (["plot", "missing.h5"], "does not exist"),
+    (["run", "--resume", "-o", "nothing.h5"], "cannot resume"),
+])
+def test_cli_errors_are_one_line(argv, msg, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err
+    assert msg in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_bad_scene_file_through_the_cli(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(edit(SMALL, "h = 10.0", "h = -10.0"))
+    r = poincare("run", str(bad), "-o", str(tmp_path / "x.h5"))
+    assert r.returncode == 2 and r.stderr.strip() == "poincare: error: run.h must be a finite positive number, got -10.0"
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_plots_are_written(tmp_path):
+    scene = parse_scene(edit(SMALL, "forms = [", "store_points = true\nforms = ["))
+    out = tmp_path / "p.h5"
+    driver.run(scene, out, progress=False)
+    assert cli_main(["plot", str(out), "-o", str(tmp_path / "png")]) == 0
+    names = sorted(p.name for p in (tmp_path / "png").iterdir())
+    assert names == sorted([f"p_I{k}_{f}.png" for k in (1, 2) for f in ("canonical", "corrected", "noncanonical")]
+                           + ["p_diagnostics.png", "p_points.png"])
+    assert all((tmp_path / "png" / n).stat().st_size > 10_000 for n in names)

@@ -2,6 +2,7 @@
 an output, a killed or extended run has the straight run's bits on any number of ranks, and a resume
 names what differs."""
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -22,8 +23,8 @@ from integrators.service.checkpoints import slot_files
 from integrators.service.scene import SceneError, load_scene, parse_scene
 from integrators.service.scene import SceneError, parse_scene
 from integrators.tableaus import tableau, tableau_from_file
+from helpers import BIN, GC, LV, SMALL, _dump, _wait_for_rows, assert_same, dump_file, edit, poincare, same, scene, stop_at_output_8
 
-from helpers import BIN, GC, LV, _dump, _wait_for_rows, assert_same, poincare, scene
 
 
 @pytest.mark.slow
@@ -215,3 +216,90 @@ def test_a_reordered_scene_with_more_steps_names_only_what_differs(tmp_path):
     with pytest.raises(ValueError) as exc:
         driver.run(swapped, out, resume=True, progress=False)
     assert "differs in run.projections (" in str(exc.value)
+
+
+def test_the_state_is_written_every_few_outputs_and_a_resume_recomputes_the_rows_after_it(tmp_path, monkeypatch):
+    """The state goes to the file about every output.checkpoint_seconds, not at every output: with
+    the default (60 s) this small run writes it once a pair, at the end.  Forced to every 3rd output,
+    with rows written every 2nd, a run stopped after output 8 of a pair has 9 rows but its state at
+    output 6; the resume drops rows 7 and 8, computes them again, and the file is the uninterrupted
+    run's, bit for bit, its settled checkpoints too."""
+    scene = parse_scene(SMALL)
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    driver.run(scene, full, progress=False)
+    with h5py.File(full) as f:
+        for name in f["runs"]:
+            assert sorted(int(f["runs"][name][f"checkpoint/{s}/step"][()]) for s in "ab") == [-1, 40], name
+    stop_at_output_8(scene, part, monkeypatch)
+    with h5py.File(part) as f:
+        g = f["runs/GLRK2-none"]
+        assert g["t"].shape[0] == 9 and g["I2/corrected"].shape[0] == 9
+        assert sorted(int(g[f"checkpoint/{s}/step"][()]) for s in "ab") == [12, 24]
+    driver.run(scene, part, progress=False, resume=True)
+    # checkpoints included: a finished pair keeps its final state in slot a, whenever states were written
+    assert same(dump_file(full, skip=("wall_clock",)), dump_file(part, skip=("wall_clock",)))
+
+
+@pytest.mark.parametrize("first,then", [("per-rank", "per-rank"), ("per-rank", "in-file"), ("in-file", "per-rank")])
+def test_per_rank_checkpoints_resume_to_the_in_file_bits(tmp_path, monkeypatch, first, then):
+    """output.checkpoints = "per-rank": each rank's state is a slab file beside the run file, linked
+    into the checkpoint slots as virtual datasets.  A run stopped after output 8 (states every 3rd
+    output), with a stray slab of another run planted beside it, resumed with either setting: every
+    value of the file, the settled checkpoints read through the links too, is the uninterrupted
+    in-file run's; the folder then holds exactly the slabs the slots link."""
+    from integrators.service import checkpoints
+    scene = lambda mode: parse_scene(SMALL.replace('"symmetric", "symplectic"', '"symplectic"')
+                                     + f'[output]\ncheckpoints = "{mode}"\n')
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    driver.run(scene("in-file"), full, progress=False)
+    stop_at_output_8(scene(first), part, monkeypatch)
+    folder = tmp_path / "part.h5.checkpoints"
+    if first == "per-rank":
+        with h5py.File(part) as f:
+            c = f["runs/GLRK2-none/checkpoint/b"]          # the newest state (step 24), linked
+            assert c["q"].is_virtual and int(c["step"][()]) == 24 and checkpoints.slot_files(c)[0][1:] == (0, 464)
+        (folder / "GLRK2-none.27.0badf00d.0-464.h5").write_bytes(b"a stopped run's slab, never linked")
+    driver.run(scene(then), part, progress=False, resume=True)
+    assert same(dump_file(full), dump_file(part))
+    with h5py.File(part) as f:
+        linked = {n for g in f["runs"].values() for s_ in "ab" for n, _, _ in checkpoints.slot_files(g[f"checkpoint/{s_}"])}
+        virtual = {k for k, g in f["runs"].items() if g["checkpoint/a/q"].is_virtual}
+    assert {p.name for p in folder.iterdir()} == linked
+    assert virtual == ({"GLRK1-none", "GLRK1-symplectic"} if first == "per-rank" else set()) \
+        | ({"GLRK2-none", "GLRK2-symplectic"} if then == "per-rank" else set())   # finished before / after the stop
+
+
+def test_kill_and_resume_gives_the_same_bits(tmp_path):
+    scene = tmp_path / "small.toml"
+    scene.write_text(edit(SMALL, "steps = 40", "steps = 500"))
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    rc_full = poincare("run", str(scene), "-o", str(full), "-q").returncode
+    assert rc_full in (0, 1)              # 1 if the 64-point loop is sheared out of resolution
+    proc = subprocess.Popen([shutil.which("poincare") or str(Path(sys.executable).parent / "poincare"),
+                             "run", str(scene), "-o", str(part), "-q"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    # wait until the third pair's first rows are on disk (a batch of about 2 s of advancing, here
+    # maybe the whole pair), then kill without warning
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        time.sleep(0.2)
+        try:
+            with h5py.File(part, "r", locking=False) as f:   # the writer holds HDF5's file lock
+                if f["runs/GLRK1-symplectic/t"].shape[0] >= 1:
+                    break
+        except (OSError, KeyError, RuntimeError):
+            pass
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    with h5py.File(part, "r") as f:                     # readable, complete up to its last output
+        done = f["runs/GLRK1-none"]
+        assert done["t"].shape[0] == 126 and done["I1/canonical"].shape[0] == 126
+        g = f["runs/GLRK1-symplectic"]
+        n = g["t"].shape[0]
+        assert 1 <= n <= 126 and all(g[k].shape[0] == n for k in ("I1/noncanonical", "I2/corrected", "energy_error"))
+        assert np.array_equal(g["t"][...], 10.0 * 4 * np.arange(n))
+    r = poincare("run", str(scene), "-o", str(part), "-q")
+    assert r.returncode == 2 and "--resume" in r.stderr
+    r = poincare("run", str(scene), "-o", str(part), "-q", "--resume")
+    assert r.returncode == rc_full, r.stderr
+    assert same(dump_file(full, skip=("wall_clock", "checkpoint")), dump_file(part, skip=("wall_clock", "checkpoint")))

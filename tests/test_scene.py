@@ -19,11 +19,11 @@ from integrators.expressions import ExpressionError, parse_expression, parse_num
 from integrators.service import driver
 from integrators.service import driver, files, output
 from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, load_scene, parse_scene
+from integrators.service.scene import SceneError, builtin_scenes, load_scene, parse_scene
 from integrators.service.scene import SceneError, parse_scene
 from integrators.tableaus import tableau, tableau_from_file
+from helpers import BIN, GC, LV, MAPS, OSC, SHAPES_CIRCLE, SHAPES_TAU, SMALL, STUCK, USER, edit, one_line, poincare, scene
 
-from helpers import BIN, GC, LV, MAPS, OSC, SHAPES_CIRCLE, SHAPES_TAU, STUCK, USER, one_line, poincare, scene
 
 
 @pytest.mark.parametrize("text", [
@@ -428,3 +428,61 @@ def test_a_singular_a_says_what_is_accepted(tmp_path, text, words):
     with pytest.raises(ValueError) as info:
         tableau_from_file(tmp_path / "m.toml")
     assert all(w in str(info.value) for w in words), str(info.value)
+
+
+@pytest.mark.parametrize("change,msg", [
+    (("h = 10.0", "h = 10.0\nspeed = 3"), "unknown key 'run.speed'"),
+    (("h = 10.0", "h = '10'"), "'run.h' must be float"),
+    (("h = 10.0", "h = 0.0"), "run.h must be a finite positive"),
+    (("h = 10.0", "h = -1.0"), "run.h must be a finite positive"),
+    (("h = 10.0", "h = nan"), "run.h must be a finite positive"),
+    (("steps = 40", "steps = 0"), "run.steps must be between 1 and"),
+    (("steps = 40", "steps = -5"), "run.steps must be between 1 and"),
+    (('"GLRK1", "GLRK2"', '"GLRK1", "GLRK9"'), "unknown tableau 'GLRK9'"),
+    (('"none", "symmetric"', '"none", "orthogonal"'), "unknown value 'orthogonal'"),
+    (('name = "guiding_centre_symmetric"', 'name = "pendulum"'), "unknown system 'pendulum'"),
+    (('name = "guiding_centre_symmetric"', 'name = "guiding_centre_symmetric"\nparams = { nu = 1.0 }'), "unknown parameter 'nu'"),
+    (("points = 64", "points = 64\nparams = { u0 = nan }"), "not finite or outside the domain"),
+    (("points = 64", "points = 2"), "loop.points must be at least 3"),
+    (("output_every = 4", "output_every = 0"), "run.output_every"),
+    (("forms = [", "forms = ['magic', "), "unknown value 'magic'"),
+    (("[run]", "[run]\ntableaus = 3\n"), "not valid TOML"),
+    (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoint_seconds = -1.0\n'), "output.checkpoint_seconds"),
+    (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoint_seconds = inf\n'), "output.checkpoint_seconds"),
+    (('"corrected"]\n', '"corrected"]\n[output]\ncheckpoints = "per-node"\n'), "output.checkpoints must be"),
+])
+def test_bad_scenes_name_the_key(change, msg):
+    with pytest.raises(SceneError, match=msg):
+        parse_scene(edit(SMALL, *change))
+
+
+def test_out_of_domain_points_and_missing_sections():
+    lv = """
+[system]
+name = "lotka_volterra_2d"
+[loop]
+shape = "ellipse"
+points = 16
+params = { d = 2, center = [0.05, 1.0], radii = [0.1, 0.1] }
+[run]
+tableaus = ["GLRK2"]
+projections = ["none"]
+h = 0.1
+steps = 10
+diagnostics = ["energy"]
+"""
+    with pytest.raises(SceneError, match="outside the domain of lotka_volterra_2d"):
+        parse_scene(lv)
+    with pytest.raises(SceneError, match="needs a \\[loop\\] or a \\[surface\\]"):
+        parse_scene("[system]\nname='point_vortices'\n[run]\ntableaus=['GLRK1']\nprojections=['none']\nh=0.1\nsteps=1")
+    with pytest.raises(SceneError, match="has no Noether momentum"):
+        parse_scene(edit(lv, 'diagnostics = ["energy"]', 'diagnostics = ["momentum"]').replace("0.05", "1.0"))
+
+
+def test_every_builtin_scene_validates():
+    names = set(builtin_scenes())
+    assert {"default", "paper_poincare", "lotka_volterra", "point_vortices", "guiding_centre_tokamak",
+            "massless_charged_particle", "lotka_volterra_4d", "guiding_centre_solovev",
+            "charged_particle_tokamak"} <= names
+    for name in names:
+        load_scene(name)
