@@ -10,76 +10,28 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-import sympy
 
-import integrators
-from integrators.cli import main as cli_main
-from integrators.expressions import ExpressionError, parse_expression, parse_number
 from integrators.service import driver
-from integrators.service import driver, files, output
-from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, load_scene, parse_scene
-from integrators.service.scene import SceneError, parse_scene
-from integrators.tableaus import tableau, tableau_from_file
-import shutil
-from integrators.service.scene import SceneError, builtin_scenes, load_scene, parse_scene
+from integrators.service.scene import parse_scene
 
 
 POINTS = Path(__file__).parent
+SCENES = POINTS / "data" / "scenes"
+
+
+def scene_text(name):
+    """The shared test scene tests/data/scenes/<name>.toml, as text."""
+    return (SCENES / f"{name}.toml").read_text()
 
 
 BIN = Path(sys.executable).parent
 
 
-LV_PAIRS = """
-name = "lv"
-[system]
-name = "lotka_volterra_2d"
-[loop]
-shape = "ellipse"
-points = 64
-params = { d = 2, center = [1.0, 1.0], radii = [0.1, 0.1] }
-[run]
-tableaus = ["GLRK1", "GLRK2"]
-projections = ["none", "standard"]
-h = 0.1
-steps = 20
-output_every = 5
-diagnostics = ["energy", "constraint"]
-"""
+LV_PAIRS = scene_text("lv_pairs")
 
 
-GC = """
-name = "gc"
-[system]
-name = "guiding_centre_symmetric"
-[loop]
-points = 64
-[surface]
-n_sigma = 20
-n_tau = 20
-[run]
-tableaus = ["GLRK2"]
-projections = ["symmetric", "symplectic"]
-h = 10.0
-steps = 40
-output_every = 4
-forms = ["canonical", "noncanonical", "corrected"]
-"""
+GC = scene_text("gc")
 
-
-def _wait_for_rows(path, pair, rows, proc, limit=120):
-    import time
-    deadline = time.time() + limit
-    while time.time() < deadline and proc.poll() is None:
-        time.sleep(0.1)
-        try:
-            with h5py.File(path, "r", locking=False) as f:
-                if f[f"runs/{pair}/t"].shape[0] >= rows:
-                    return True
-        except (OSError, KeyError, RuntimeError):
-            pass
-    return False
 
 
 def _flip_chunk(path, dataset):
@@ -90,16 +42,6 @@ def _flip_chunk(path, dataset):
         fh.seek(info.byte_offset + 8)
         fh.write(b"\x13\x37" * 8)
 
-
-def _dump(path, skip=("wall_clock", "checkpoint")):
-    out = {}
-    with h5py.File(path, "r") as f:
-        def visit(name, obj):
-            if isinstance(obj, h5py.Dataset) and not any(s in name for s in skip):
-                out[name] = obj[...]
-        f.visititems(visit)
-        out["status"] = {k: f["runs"][k].attrs["status"] for k in f["runs"]}
-    return out
 
 
 SHAPES_CIRCLE = '''
@@ -113,24 +55,7 @@ def boom(tau):
 '''
 
 
-LV = """
-name = "lv"
-[system]
-name = "lotka_volterra_2d"
-[loop]
-shape = "ellipse"
-points = 64
-params = { d = 2, center = [1.0, 1.0], radii = [0.1, 0.1] }
-[run]
-tableaus = ["GLRK2"]
-projections = ["none", "symmetric"]
-h = 0.1
-steps = 20
-output_every = 10
-diagnostics = ["energy", "constraint"]
-[output]
-checkpoint_seconds = 0.0
-"""
+LV = scene_text("lv")
 
 
 def scene(steps, every=10, text=LV):
@@ -138,23 +63,34 @@ def scene(steps, every=10, text=LV):
                                                                               f"output_every = {every}"))
 
 
-def dump(path):
-    """Every dataset and status of a run file, checkpoints included (not the wall clocks)."""
+def dump(path, skip=("wall_clock",)):
+    """Every dataset and status of a run file, checkpoints included, but for datasets whose names
+    contain one of ``skip`` (the wall clocks by default)."""
     out = {}
     with h5py.File(path, "r") as f:
         def visit(name, obj):
-            if isinstance(obj, h5py.Dataset) and "wall_clock" not in name:
-                out[name] = obj[...]
+            if isinstance(obj, h5py.Dataset) and not any(s in name for s in skip):
+                out[name] = obj[()]
         f.visititems(visit)
         out["status"] = {k: str(f["runs"][k].attrs["status"]) for k in f["runs"]}
     return out
 
 
+def differing(a, b):
+    """The entries of two dumps that are not bitwise equal (NaN equal to NaN where both are)."""
+    return sorted(set(a) ^ set(b)) + [
+        k for k in set(a) & set(b) if not ((a[k] == b[k]) if k == "status" else np.array_equal(
+            a[k], b[k], equal_nan=np.asarray(a[k]).dtype.kind in "fc"))]
+
+
+def same(a, b):
+    return not differing(a, b)
+
+
 def assert_same(a, b):
-    da, db = dump(a), dump(b)
-    assert da.keys() == db.keys()
-    differ = [k for k in da if not (da[k] == db[k] if k == "status" else np.array_equal(da[k], db[k]))]
-    assert not differ, differ
+    """Two run files (paths) or two dumps hold the same bits."""
+    da, db = (x if isinstance(x, dict) else dump(x) for x in (a, b))
+    assert not differing(da, db), differing(da, db)
 
 
 def poincare(*args, cwd=None, n=None, env=None, **kw):
@@ -165,24 +101,7 @@ def poincare(*args, cwd=None, n=None, env=None, **kw):
                           env=None if env is None else {**os.environ, **env}, **kw)
 
 
-USER = """
-name = "osc"
-[system]
-name = "oscillator"
-coordinates = ["x", "y"]
-theta = ["-y/2", "x/2"]
-H = "x^2 + y^2"
-[loop]
-shape = "ellipse"
-points = 32
-params = { d = 2, center = [0.5, 0.5], radii = [0.05, 0.05] }
-[run]
-tableaus = ["GLRK1"]
-projections = ["none"]
-h = 0.1
-steps = 20
-output_every = 10
-"""
+USER = scene_text("oscillator")
 
 
 def one_line(r, *words):
@@ -246,7 +165,7 @@ def _rows(path, pair):
         return f[f"runs/{pair}/t"].shape[0]
 
 
-def _wait_rows(path, pair, rows, proc, limit=120):
+def wait_rows(path, pair, rows, proc, limit=120):
     deadline = time.time() + limit
     while time.time() < deadline and proc.poll() is None:
         time.sleep(0.1)
@@ -257,8 +176,6 @@ def _wait_rows(path, pair, rows, proc, limit=120):
             pass
     return False
 
-
-OSC = USER.replace('H = "x^2 + y^2"', 'H = "x^2 + y^2"')
 
 
 def _limited(extra):
@@ -284,23 +201,7 @@ def _finished_then_on_a_full_disk(tmp_path, room, *args):
 
 
 
-SMALL = """
-name = "small"
-[system]
-name = "guiding_centre_symmetric"
-[loop]
-points = 64
-[surface]
-n_sigma = 20
-n_tau = 20
-[run]
-tableaus = ["GLRK1", "GLRK2"]
-projections = ["none", "symmetric", "symplectic"]
-h = 10.0
-steps = 40
-output_every = 4
-forms = ["canonical", "noncanonical", "corrected"]
-"""
+SMALL = scene_text("small")
 
 
 def edit(text, old, new):
@@ -308,20 +209,6 @@ def edit(text, old, new):
     return text.replace(old, new)
 
 
-def dump_file(path, skip=("wall_clock",)):
-    out = {}
-    with h5py.File(path, "r") as f:
-        def visit(name, obj):
-            if isinstance(obj, h5py.Dataset) and not any(s in name for s in skip):
-                out[name] = obj[()]
-        f.visititems(visit)
-        out["status"] = {k: f["runs"][k].attrs["status"] for k in f["runs"]}
-    return out
-
-
-def same(a, b):
-    return set(a) == set(b) and all(
-        (a[k] == b[k]) if k == "status" else np.array_equal(a[k], b[k]) for k in a)
 
 
 def stop_at_output_8(scene, path, monkeypatch):

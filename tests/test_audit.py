@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 import integrators
-from integrators import audit
-from integrators import cli
+from integrators import audit, cli
 from integrators.service.scene import load_scene, parse_scene
 
 import audit_maps  # noqa: E402  (tests/ is on sys.path under pytest)

@@ -3,25 +3,19 @@ plots, the audit's options, and advice in the caller's words."""
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-import sympy
 
 import integrators
 from integrators.cli import main as cli_main
-from integrators.expressions import ExpressionError, parse_expression, parse_number
 from integrators.service import driver
-from integrators.service import driver, files, output
-from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, load_scene, parse_scene
-from integrators.service.scene import SceneError, parse_scene
-from integrators.tableaus import tableau, tableau_from_file
-from helpers import BIN, GC, LV, LV_PAIRS, MAPS, OSC, PARTIAL, POINTS, SHAPES_TAU, SMALL, STUCK, USER, _wait_for_rows, _wait_rows, edit, one_line, poincare, scene
+from integrators.service.scene import load_scene, parse_scene
+from integrators.tableaus import tableau
+from helpers import BIN, edit, GC, LV, LV_PAIRS, MAPS, one_line, PARTIAL, poincare, POINTS, SHAPES_TAU, SMALL, STUCK, USER, wait_rows
 
 
 
@@ -97,7 +91,7 @@ def test_a_signal_flushes_says_how_to_resume_and_resume_finishes(tmp_path, signa
     out = tmp_path / "gc.h5"
     proc = subprocess.Popen([str(BIN / "poincare"), "run", str(scene), "-o", str(out), "-q"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert _wait_for_rows(out, "GLRK2-symmetric", 5, proc)
+    assert wait_rows(out, "GLRK2-symmetric", 5, proc)
     proc.send_signal(getattr(signal, signame))
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == code, err
@@ -117,7 +111,7 @@ def test_sigterm_under_mpiexec_stops_every_rank(tmp_path):
     out = tmp_path / "gc.h5"
     proc = subprocess.Popen([str(BIN / "mpiexec"), "-n", "2", str(BIN / "poincare"), "run", str(scene), "-o", str(out),
                              "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert _wait_for_rows(out, "GLRK2-symmetric", 5, proc)
+    assert wait_rows(out, "GLRK2-symmetric", 5, proc)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)          # no rank is left waiting in a collective
     assert proc.returncode == 143
@@ -227,8 +221,8 @@ def test_a_partial_pair_shows_no_error_it_cannot_vouch_for(tmp_path):
     assert "broke down" in _caption(False, True) and "under-resolved" not in _caption(False, True)
 
 
-def test_threads_beyond_the_cores_are_refused(tmp_path, capsys):
-    (tmp_path / "osc.toml").write_text(USER)
+def test_threads_beyond_the_cores_are_refused(tmp_path, scene_file, capsys):
+    scene_file("oscillator", to="osc.toml")
     assert cli_main(["run", str(tmp_path / "osc.toml"), "-o", str(tmp_path / "o.h5"), "--threads", "100000"]) == 2
     assert "--threads must be between 1 and" in capsys.readouterr().err
     assert not (tmp_path / "o.h5").exists()
@@ -258,7 +252,7 @@ def test_a_step_map_that_never_returns_is_stopped_by_a_signal(tmp_path, how, sig
     env = dict(os.environ, **({"SPIN": "1"} if how == "spin" else {}))
     proc = subprocess.Popen([str(BIN / "poincare"), "run", "s.toml", "-o", "s.h5", "-q"], cwd=tmp_path, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert _wait_rows(tmp_path / "s.h5", "stuck-map", 3, proc)
+    assert wait_rows(tmp_path / "s.h5", "stuck-map", 3, proc)
     time.sleep(1.0)                       # now in the map for good (calls > 30: output rows at 10 steps)
     proc.send_signal(getattr(signal, signame))
     _, err = proc.communicate(timeout=30)
@@ -279,7 +273,7 @@ def test_a_rank_stuck_in_user_code_does_not_keep_mpiexec_from_stopping(tmp_path)
     env = dict(os.environ, STUCK_RANK="1", POINCARE_STOP_GRACE="1")
     proc = subprocess.Popen([str(BIN / "mpiexec"), "-n", "2", str(BIN / "poincare"), "run", "s.toml", "-o", "s.h5",
                              "-q"], cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert _wait_rows(tmp_path / "s.h5", "stuck-map", 2, proc)
+    assert wait_rows(tmp_path / "s.h5", "stuck-map", 2, proc)
     time.sleep(2.0)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
@@ -320,12 +314,12 @@ def test_sys_exit_in_a_step_map_stops_its_points_not_the_run(tmp_path):
         assert f["runs/bye-map"].attrs["status"] == "failed"
 
 
-def test_sys_exit_in_a_shape_is_one_line_and_force_keeps_the_old_file(tmp_path):
+def test_sys_exit_in_a_shape_is_one_line_and_force_keeps_the_old_file(tmp_path, scene_file):
     (tmp_path / "maps.py").write_text(MAPS)
-    (tmp_path / "s.toml").write_text(OSC)
+    scene_file("oscillator", to="s.toml")
     assert poincare("run", "s.toml", "-o", "s.h5", "-q", cwd=tmp_path).returncode == 0
     before = (tmp_path / "s.h5").read_bytes()
-    (tmp_path / "s.toml").write_text(OSC.replace('shape = "ellipse"', 'shape = "maps.py:shape_bye"')
+    (tmp_path / "s.toml").write_text(USER.replace('shape = "ellipse"', 'shape = "maps.py:shape_bye"')
                                      .replace("params = { d = 2, center = [0.5, 0.5], radii = [0.05, 0.05] }\n", ""))
     r = poincare("run", "s.toml", "-o", "s.h5", "-q", "--force", cwd=tmp_path)
     assert r.returncode == 2
@@ -336,7 +330,7 @@ def test_sys_exit_in_a_shape_is_one_line_and_force_keeps_the_old_file(tmp_path):
 def test_an_energy_error_where_H0_is_zero_is_absolute_and_said(tmp_path):
     """H = y − 1/2 vanishes at two loop points (τ = 0, 1/2: y = 1/2 + 0.05 sin 2πτ is 1/2 exactly):
     there the error is |H − H0|, never NaN, and the file and the summary say so."""
-    (tmp_path / "s.toml").write_text(OSC.replace('H = "x^2 + y^2"', 'H = "y - 1/2"')
+    (tmp_path / "s.toml").write_text(USER.replace('H = "x^2 + y^2"', 'H = "y - 1/2"')
                                      .replace('projections = ["none"]', 'projections = ["none"]\n'
                                               'diagnostics = ["energy", "constraint"]'))
     r = poincare("run", "s.toml", "-o", "s.h5", "-q", cwd=tmp_path)
@@ -374,8 +368,8 @@ def test_plots_into_a_folder_that_cannot_be_written(tmp_path, monkeypatch, capsy
     assert err.count("\n") == 1 and "cannot write plots in" in err and "Errno" not in err
 
 
-def test_an_empty_output_option_is_refused(tmp_path, capsys):
-    (tmp_path / "lv.toml").write_text(LV)
+def test_an_empty_output_option_is_refused(tmp_path, scene_file, capsys):
+    scene_file("lv")
     assert cli_main(["run", str(tmp_path / "lv.toml"), "-o", "", "-q"]) == 2
     assert "-o/--output is empty" in capsys.readouterr().err
     from integrators import service
@@ -383,9 +377,9 @@ def test_an_empty_output_option_is_refused(tmp_path, capsys):
         service.run(str(tmp_path / "lv.toml"), "  ")
 
 
-def test_a_python_caller_is_advised_in_python_words(tmp_path):
+def test_a_python_caller_is_advised_in_python_words(tmp_path, scene_file):
     from integrators import service
-    (tmp_path / "lv.toml").write_text(LV)
+    scene_file("lv")
     service.run(str(tmp_path / "lv.toml"), tmp_path / "a.h5", progress=False)
     with pytest.raises(ValueError) as info:
         service.run(str(tmp_path / "lv.toml"), tmp_path / "a.h5", progress=False)

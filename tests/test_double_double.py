@@ -228,7 +228,7 @@ def test_a_double_double_scene_says_so_keeps_the_low_parts_and_resumes_bitwise(t
     import h5py
     from integrators.service import driver, reader
     from integrators.service.scene import parse_scene
-    from helpers import dump_file as dump, same, stop_at_output_8
+    from helpers import dump, same, stop_at_output_8
     scene = parse_scene(DD_SCENE)
     assert scene.precision == "double-double"
     full, part, dbl = tmp_path / "full.h5", tmp_path / "part.h5", tmp_path / "double.h5"

@@ -1,30 +1,18 @@
 """The batch-run driver (integrators/service/driver.py, ranks.py, tasks.py): the file it writes, its batches
 and checkpoint cadence, bitwise the same results for 1 to 16 ranks and for ranks at uneven speeds, and
 how the points and the invariant tasks are shared among the ranks."""
-import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-import sympy
 
-import integrators
-from integrators.cli import main as cli_main
-from integrators.expressions import ExpressionError, parse_expression, parse_number
 from integrators.service import driver
-from integrators.service import driver, files, output
-from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, load_scene, parse_scene
-from integrators.service.scene import SceneError, parse_scene
-from integrators.tableaus import tableau, tableau_from_file
+from integrators.service.scene import parse_scene
 import shutil
-from integrators.service.scene import SceneError, builtin_scenes, load_scene, parse_scene
-from helpers import JITTER, SMALL, dump_file, edit, poincare, same, scene
+from helpers import JITTER, SMALL, differing, dump, edit, poincare, same
 
 
 def test_run_writes_the_spec_layout_and_the_papers_findings(tmp_path):
@@ -87,7 +75,7 @@ def test_results_are_bitwise_identical_for_1_2_3_5_8_and_16_ranks(tmp_path):
         assert r.returncode == 0, r.stderr
         if n:
             assert f"{n} ranks" in r.stdout
-        files[n or 1] = dump_file(out)
+        files[n or 1] = dump(out)
     for n in (2, 3, 5, 8, 16):
         assert same(files[1], files[n]), n
 
@@ -112,8 +100,8 @@ def test_ranks_that_run_at_uneven_speeds_give_the_same_bits(tmp_path, slowest):
             cmd = [shutil.which("mpiexec") or str(Path(sys.executable).parent / "mpiexec"), "-n", str(n), *cmd]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
         assert r.returncode == 0, r.stderr[-3000:]
-        files.append(dump_file(out))
-    assert same(*files)
+        files.append(dump(out))
+    assert same(*files), differing(*files)
 
 
 def test_split_gives_rank0_less_work_by_its_output_cost():

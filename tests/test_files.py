@@ -2,28 +2,18 @@
 truncated, busy and locked files told apart, a full disk and a read-only file system in one line, --force
 that replaces a file only once the new run has started, and files that are never changed by a refusal."""
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import h5py
-import numpy as np
 import pytest
-import sympy
 
-import integrators
 from integrators.cli import main as cli_main
-from integrators.expressions import ExpressionError, parse_expression, parse_number
-from integrators.service import driver
 from integrators.service import driver, files, output
-from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, load_scene, parse_scene
-from integrators.service.scene import SceneError, parse_scene
-from integrators.tableaus import tableau, tableau_from_file
+from integrators.service.scene import parse_scene
 
-from helpers import BIN, GC, LV, OSC, _claim_petabytes, _finished_then_on_a_full_disk, _flip_chunk, one_line, poincare, scene
+from helpers import BIN, GC, LV, USER, _claim_petabytes, _finished_then_on_a_full_disk, _flip_chunk, one_line, poincare, scene
 
 
 def test_a_full_disk_is_one_line_and_leaves_a_readable_file(tmp_path):
@@ -63,7 +53,7 @@ def test_unusable_outputs_are_one_plain_line(tmp_path, capsys, make, args, msg):
     assert "flags =" not in err and "errno" not in err.lower()
 
 
-def test_damaged_data_and_metadata_are_reported_not_plotted(tmp_path, capsys):
+def test_damaged_data_and_metadata_are_reported_not_plotted(tmp_path, scene_file, capsys):
     out = tmp_path / "gc.h5"
     driver.run(parse_scene(GC), out, progress=False)
     _flip_chunk(out, "runs/GLRK2-symplectic/I1/noncanonical")
@@ -71,7 +61,7 @@ def test_damaged_data_and_metadata_are_reported_not_plotted(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "damaged" in err and "I1/noncanonical" in err
     # a resume of the damaged file is one line too
-    (tmp_path / "gc.toml").write_text(GC)
+    scene_file("gc")
     assert cli_main(["run", str(tmp_path / "gc.toml"), "-o", str(out), "--resume", "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "damaged" in err and "--force" in err
@@ -155,10 +145,10 @@ def test_a_file_another_run_is_writing_is_called_busy_not_damaged(tmp_path):
         holder.wait()
 
 
-def test_resume_on_a_read_only_file_system_exits_3_and_changes_nothing(tmp_path, monkeypatch, capsys):
+def test_resume_on_a_read_only_file_system_exits_3_and_changes_nothing(tmp_path, scene_file, monkeypatch, capsys):
     from integrators.service import output
     out = tmp_path / "lv.h5"
-    (tmp_path / "lv.toml").write_text(LV)
+    scene_file("lv")
     driver.run(scene(20), out, progress=False)
     before = out.read_bytes()
     real = output.h5py.File
@@ -208,11 +198,11 @@ def test_force_through_a_symlink_replaces_its_target(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_truncated_file_is_called_damaged_not_locked(tmp_path):
+def test_a_truncated_file_is_called_damaged_not_locked(tmp_path, scene_file):
     out = tmp_path / "lv.h5"
     driver.run(parse_scene(LV), out, progress=False)
     clean = out.read_bytes()
-    (tmp_path / "lv.toml").write_text(LV)
+    scene_file("lv")
     for size in (512, 1024, 2048, 4096, len(clean) // 2):
         out.write_bytes(clean[:size])
         for args in (("plot", str(out), "-o", str(tmp_path / "png")),
@@ -285,7 +275,7 @@ def test_an_os_error_during_force_abandons_the_replacement(tmp_path, monkeypatch
 
 def test_an_unwritable_cache_is_named(tmp_path):
     (tmp_path / "file").write_text("")
-    (tmp_path / "s.toml").write_text(OSC.replace("x^2 + y^2", "x^2 + y^2 + 0.125"))   # a system not yet cached
+    (tmp_path / "s.toml").write_text(USER.replace("x^2 + y^2", "x^2 + y^2 + 0.125"))   # a system not yet cached
     r = poincare("run", "s.toml", "-o", "s.h5", "-q", cwd=tmp_path, env={"POINCARE_CACHE": str(tmp_path / "file/x")})
     assert r.returncode == 2 and not (tmp_path / "s.h5").exists()
     one_line(r, "$POINCARE_CACHE", str(tmp_path / "file/x"))

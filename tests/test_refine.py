@@ -11,7 +11,8 @@ import pytest
 
 from integrators.service import driver
 from integrators.service.reader import read_run
-from integrators.service.scene import SceneError, parse_scene
+from integrators.service.scene import parse_scene, SceneError
+from helpers import assert_same, dump
 from invariants.samples import first_level, loop, refined_grid, surface
 
 # the paper's guiding-centre loop of 64 points goes under-resolved near t = 2,000 (step 200); the
@@ -39,19 +40,6 @@ checkpoint_seconds = 0.0
 """
 
 
-def dump(path):
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if isinstance(obj, h5py.Dataset) and "wall_clock" not in name else None)
-        out["status"] = {k: str(f["runs"][k].attrs["status"]) for k in f["runs"]}
-    return out
-
-
-def assert_same(a, b):
-    assert a.keys() == b.keys()
-    for k in a:
-        assert (a[k] == b[k]) if k == "status" else np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f"), k
 
 
 def test_levels_nest_and_keep_every_old_point():

@@ -1,7 +1,6 @@
 """Resuming and extending runs (integrators/service/resumable.py, driver.py): the last partial interval is
 an output, a killed or extended run has the straight run's bits on any number of ranks, and a resume
 names what differs."""
-import os
 import shutil
 import signal
 import subprocess
@@ -12,18 +11,13 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-import sympy
 
 import integrators
 from integrators.cli import main as cli_main
-from integrators.expressions import ExpressionError, parse_expression, parse_number
 from integrators.service import driver
-from integrators.service import driver, files, output
 from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, load_scene, parse_scene
-from integrators.service.scene import SceneError, parse_scene
-from integrators.tableaus import tableau, tableau_from_file
-from helpers import BIN, GC, LV, SMALL, _dump, _wait_for_rows, assert_same, dump_file, edit, poincare, same, scene, stop_at_output_8
+from integrators.service.scene import parse_scene, SceneError
+from helpers import BIN, GC, LV, SMALL, wait_rows, assert_same, dump, edit, poincare, same, scene, stop_at_output_8
 
 
 
@@ -47,7 +41,7 @@ def test_a_run_stopped_on_2_ranks_resumes_on_3_to_the_one_rank_bits(tmp_path, ch
     rc = poincare("run", str(tmp_path / "full.toml"), "-o", str(full), "-q").returncode
     proc = subprocess.Popen([str(BIN / "mpiexec"), "-n", "2", str(BIN / "poincare"), "run", str(scene), "-o",
                              str(part), "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert _wait_for_rows(part, "GLRK2-symmetric", 5, proc)
+    assert wait_rows(part, "GLRK2-symmetric", 5, proc)
     proc.send_signal(signal.SIGTERM)
     proc.communicate(timeout=60)
     assert proc.returncode == 143
@@ -103,14 +97,14 @@ def test_a_finished_run_extended_to_more_steps_equals_one_longer_run(tmp_path):
     assert poincare("run", str(short), "-o", str(a), "-q").returncode == 0
     r = poincare("run", str(longer), "-o", str(a), "-q", "--resume")
     assert r.returncode == 0, r.stderr
-    da, db = _dump(a), _dump(b)
+    da, db = dump(a, skip=("wall_clock", "checkpoint")), dump(b, skip=("wall_clock", "checkpoint"))
     assert da.keys() == db.keys() and all(
         np.array_equal(da[k], db[k]) if k != "status" else da[k] == db[k] for k in da)
     # the same through --steps on the command line, and fewer steps are refused
     c = tmp_path / "c.h5"
     assert poincare("run", str(short), "-o", str(c), "-q").returncode == 0
     assert poincare("run", str(short), "-o", str(c), "-q", "--resume", "--steps", "80").returncode == 0
-    dc = _dump(c)
+    dc = dump(c, skip=("wall_clock", "checkpoint"))
     assert all(np.array_equal(dc[k], db[k]) if k != "status" else dc[k] == db[k] for k in db)
     r = poincare("run", str(short), "-o", str(c), "-q", "--resume")
     assert r.returncode == 2 and "fewer steps" in r.stderr
@@ -237,7 +231,7 @@ def test_the_state_is_written_every_few_outputs_and_a_resume_recomputes_the_rows
         assert sorted(int(g[f"checkpoint/{s}/step"][()]) for s in "ab") == [12, 24]
     driver.run(scene, part, progress=False, resume=True)
     # checkpoints included: a finished pair keeps its final state in slot a, whenever states were written
-    assert same(dump_file(full, skip=("wall_clock",)), dump_file(part, skip=("wall_clock",)))
+    assert same(dump(full, skip=("wall_clock",)), dump(part, skip=("wall_clock",)))
 
 
 @pytest.mark.parametrize("first,then", [("per-rank", "per-rank"), ("per-rank", "in-file"), ("in-file", "per-rank")])
@@ -260,7 +254,7 @@ def test_per_rank_checkpoints_resume_to_the_in_file_bits(tmp_path, monkeypatch, 
             assert c["q"].is_virtual and int(c["step"][()]) == 24 and checkpoints.slot_files(c)[0][1:] == (0, 464)
         (folder / "GLRK2-none.27.0badf00d.0-464.h5").write_bytes(b"a stopped run's slab, never linked")
     driver.run(scene(then), part, progress=False, resume=True)
-    assert same(dump_file(full), dump_file(part))
+    assert same(dump(full), dump(part))
     with h5py.File(part) as f:
         linked = {n for g in f["runs"].values() for s_ in "ab" for n, _, _ in checkpoints.slot_files(g[f"checkpoint/{s_}"])}
         virtual = {k for k, g in f["runs"].items() if g["checkpoint/a/q"].is_virtual}
@@ -302,4 +296,4 @@ def test_kill_and_resume_gives_the_same_bits(tmp_path):
     assert r.returncode == 2 and "--resume" in r.stderr
     r = poincare("run", str(scene), "-o", str(part), "-q", "--resume")
     assert r.returncode == rc_full, r.stderr
-    assert same(dump_file(full, skip=("wall_clock", "checkpoint")), dump_file(part, skip=("wall_clock", "checkpoint")))
+    assert same(dump(full, skip=("wall_clock", "checkpoint")), dump(part, skip=("wall_clock", "checkpoint")))

@@ -2,13 +2,8 @@
 before any file is written, and code a scene names runs only from its folder (integrators/service/scene.py,
 expressions.py, tableaus.py, plugins.py)."""
 import os
-import signal
 import subprocess
-import sys
-import time
-from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 import sympy
@@ -17,12 +12,9 @@ import integrators
 from integrators.cli import main as cli_main
 from integrators.expressions import ExpressionError, parse_expression, parse_number
 from integrators.service import driver
-from integrators.service import driver, files, output
-from integrators.service.checkpoints import slot_files
-from integrators.service.scene import SceneError, builtin_scenes, load_scene, parse_scene
-from integrators.service.scene import SceneError, parse_scene
+from integrators.service.scene import builtin_scenes, load_scene, parse_scene, SceneError
 from integrators.tableaus import tableau, tableau_from_file
-from helpers import BIN, GC, LV, MAPS, OSC, SHAPES_CIRCLE, SHAPES_TAU, SMALL, STUCK, USER, edit, one_line, poincare, scene
+from helpers import BIN, edit, GC, LV, MAPS, one_line, poincare, SHAPES_CIRCLE, SHAPES_TAU, SMALL, STUCK, USER
 
 
 
@@ -222,14 +214,23 @@ steps = 2
         parse_scene(text.replace("[0.2, 0.1]", '[0.2, "x"]'))
 
 
+@pytest.fixture(scope="module")
+def finished_oscillator(tmp_path_factory):
+    """The bytes of a finished run of the oscillator scene (made once for the tests below)."""
+    where = tmp_path_factory.mktemp("finished")
+    (where / "osc.toml").write_text(USER)
+    assert poincare("run", "osc.toml", "-o", "out.h5", "-q", cwd=where).returncode == 0
+    return (where / "out.h5").read_bytes()
+
+
 @pytest.mark.parametrize("H,what", [("1/(x - x)", "complex infinity"), ("x/0", "complex infinity"),
                                     ("log(0)*x", "complex infinity"), ("0/0 + x", "NaN"),
                                     ("1e400*x", "too large for a double")])
-def test_a_non_finite_expression_is_refused_before_the_file_and_force_keeps_the_old_one(tmp_path, H, what):
+def test_a_non_finite_expression_is_refused_before_the_file_and_force_keeps_the_old_one(
+        tmp_path, finished_oscillator, H, what):
     scene = tmp_path / "osc.toml"
-    scene.write_text(USER)
-    assert poincare("run", "osc.toml", "-o", "out.h5", "-q", cwd=tmp_path).returncode == 0
-    before = (tmp_path / "out.h5").read_bytes()
+    before = finished_oscillator
+    (tmp_path / "out.h5").write_bytes(before)
     scene.write_text(USER.replace('H = "x^2 + y^2"', f'H = "{H}"'))
     for args in ((), ("--force",)):
         r = poincare("run", "osc.toml", "-o", "new.h5" if not args else "out.h5", "-q", *args, cwd=tmp_path)
@@ -328,10 +329,10 @@ def test_an_expression_not_finite_at_the_sample_points_is_refused():
         parse_scene(USER.replace('H = "x^2 + y^2"', 'H = "sqrt(x - 10) + y^2"'))
 
 
-def test_a_step_count_beyond_exact_step_times_is_refused(capsys, tmp_path):
+def test_a_step_count_beyond_exact_step_times_is_refused(capsys, tmp_path, scene_file):
     with pytest.raises(SceneError, match=r"run.steps must be between 1 and 2\^53"):
         parse_scene(USER.replace("steps = 20", "steps = 100000000000000000000"))
-    (tmp_path / "osc.toml").write_text(USER)
+    scene_file("oscillator", to="osc.toml")
     assert cli_main(["run", str(tmp_path / "osc.toml"), "-o", str(tmp_path / "o.h5"), "--steps", str(2**53 + 1)]) == 2
     assert "--steps must be at most 2^53" in capsys.readouterr().err and not (tmp_path / "o.h5").exists()
 
@@ -344,7 +345,7 @@ def test_a_step_count_beyond_exact_step_times_is_refused(capsys, tmp_path):
     (lambda t: t.replace("h = 0.1", "h = 1e-320"), ("run.h", "outside [1e-150, 1e+150]")),
 ])
 def test_hostile_scenes_are_one_line_before_any_file(tmp_path, change, words):
-    (tmp_path / "s.toml").write_text(change(OSC))
+    (tmp_path / "s.toml").write_text(change(USER))
     r = poincare("run", "s.toml", "-o", "s.h5", "-q", cwd=tmp_path)
     assert r.returncode == 2
     one_line(r, *words)
@@ -357,7 +358,7 @@ def test_hostile_scenes_are_one_line_before_any_file(tmp_path, change, words):
 ])
 def test_hostile_tableau_files_are_one_line(tmp_path, text, words):
     (tmp_path / "t.toml").write_text(text)
-    (tmp_path / "s.toml").write_text(OSC.replace('tableaus = ["GLRK1"]', 'tableaus = ["t.toml"]'))
+    (tmp_path / "s.toml").write_text(USER.replace('tableaus = ["GLRK1"]', 'tableaus = ["t.toml"]'))
     r = poincare("run", "s.toml", "-o", "s.h5", "-q", cwd=tmp_path)
     assert r.returncode == 2 and not (tmp_path / "s.h5").exists()
     one_line(r, "t.toml", *words)
