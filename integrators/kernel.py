@@ -33,14 +33,14 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
 from numba.np.unsafe.ndarray import to_fixed_tuple
 from numba.extending import overload
 
 from .ddouble import DDType, dd
 
-from .simd import DDVec, _at, anyl, at, elem, elem3, is_complex, ld, lget, lmask, lanes, lset, mand, mnot, mor, nlanes, \
-    plain, put, put3, raw, re, sel, st, step_measure
+from .simd import DDVec, LanePtr, _at, anyl, at, elem, elem3, is_complex, ld, lget, lanes, lset, mand, mnot, mor, nlanes, \
+    ldi, plain, put, put3, raw, re, sel, st, sti, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
 
@@ -226,14 +226,35 @@ def _runtime(k, like):
 
 # -- small dense linear algebra, per lane ---------------------------------------------------------
 
-@njit(inline='always', **_OPTS)
-def lu_factor(A, piv, n):
-    """In-place LU of the n×n row-major A with partial pivoting, each lane its own pivots (chosen on
-    the real part, so the complex-step specialisation pivots exactly as the real one).  A zero pivot
-    is left in place: the solve then gives inf/NaN, which the Newton iteration reads as a failure."""
-    W = nlanes(A)
-    for col in range(n):
-        for l in range(W):
+def pivot(A, piv, col, n):
+    """Partial pivoting of column ``col``, each lane on its own: the first row at or below col whose
+    |real part| is strictly the largest becomes the pivot (piv[col]), and rows col and that one swap
+    (the whole row, as LAPACK does)."""
+
+
+@overload(pivot, inline="always")
+def _pivot(A, piv, col, n):
+    if _real_lanes(A):
+        def vector(A, piv, col, n):       # W real lanes: the search by compares and selects
+            best = abs(ld(A, col * n + col))
+            p = sel(best == best, float(col), float(col))
+            for i in range(col + 1, n):
+                v = abs(ld(A, i * n + col))
+                larger = v > best
+                best = sel(larger, v, best)
+                p = sel(larger, float(i), p)
+            sti(piv, col, p)
+            for i in range(col + 1, n):
+                swap = p == float(i)
+                if anyl(swap):
+                    for j in range(n):
+                        a, b = ld(A, col * n + j), ld(A, i * n + j)
+                        st(A, col * n + j, sel(swap, b, a))
+                        st(A, i * n + j, sel(swap, a, b))
+        return vector
+
+    def lanewise(A, piv, col, n):         # one lane, complex-step or double-double values: lane by lane
+        for l in range(nlanes(A)):
             p = col
             best = abs(re(lget(A, col * n + col, l)))
             for i in range(col + 1, n):
@@ -246,6 +267,16 @@ def lu_factor(A, piv, n):
                     tmp = lget(A, col * n + j, l)
                     lset(A, col * n + j, l, lget(A, p * n + j, l))
                     lset(A, p * n + j, l, tmp)
+    return lanewise
+
+
+@njit(inline='always', **_OPTS)
+def lu_factor(A, piv, n):
+    """In-place LU of the n×n row-major A with partial pivoting, each lane its own pivots (chosen on
+    the real part, so the complex-step specialisation pivots exactly as the real one).  A zero pivot
+    is left in place: the solve then gives inf/NaN, which the Newton iteration reads as a failure."""
+    for col in range(n):
+        pivot(A, piv, col, n)
         inv = 1.0 / ld(A, col * n + col)
         for i in range(col + 1, n):
             f = ld(A, i * n + col) * inv
@@ -257,17 +288,49 @@ def lu_factor(A, piv, n):
                     st(A, i * n + j, sel(nonzero, x - f * ld(A, col * n + j), x))
 
 
+def _real_lanes(A):
+    """Whether A is a pointer to W > 1 lanes of doubles (the vector forms of the pivoting)."""
+    return isinstance(A, LanePtr) and A.W > 1 and A.dtype == types.float64
+
+
+def permute(piv, x, n):
+    """x[i] ⇄ x[piv[i]] for i = 0 … n − 1, each lane with its own pivots (the row swaps of
+    :func:`lu_factor` applied to a right-hand side)."""
+
+
+@overload(permute, inline="always")
+def _permute(piv, x, n):
+    if _real_lanes(x):
+        def vector(piv, x, n):            # W real lanes: compares and selects, nothing lane by lane
+            for i in range(n):
+                p = ldi(piv, i)
+                if anyl(p != float(i)):
+                    xi = ld(x, i)
+                    new = xi
+                    for r in range(i + 1, n):
+                        here = p == float(r)
+                        if anyl(here):
+                            xr = ld(x, r)
+                            st(x, r, sel(here, xi, xr))
+                            new = sel(here, xr, new)
+                    st(x, i, new)
+        return vector
+
+    def lanewise(piv, x, n):              # one lane, complex-step or double-double values
+        for i in range(n):
+            for l in range(nlanes(x)):
+                p = lget(piv, i, l)
+                if p != i:
+                    tmp = lget(x, i, l)
+                    lset(x, i, l, lget(x, p, l))
+                    lset(x, p, l, tmp)
+    return lanewise
+
+
 @njit(inline='always', **_OPTS)
 def lu_solve(A, piv, x, n):
     """Solve A x = b in place (x holds b on entry) with the factors of :func:`lu_factor`."""
-    W = nlanes(A)
-    for i in range(n):
-        for l in range(W):
-            p = lget(piv, i, l)
-            if p != i:
-                tmp = lget(x, i, l)
-                lset(x, i, l, lget(x, p, l))
-                lset(x, p, l, tmp)
+    permute(piv, x, n)
     for i in range(n):
         acc = ld(x, i)
         for j in range(i):
@@ -542,10 +605,8 @@ def _keep_factors(LU, piv, Jt, pivt, stale, nz):
     """The fresh factors Jt, pivt (every lane's) into LU, piv for the lanes that asked (``stale``)."""
     for i in range(nz * nz):
         st(LU, i, sel(stale, ld(Jt, i), ld(LU, i)))
-    for l in range(nlanes(LU)):
-        if lmask(stale, l):
-            for i in range(nz):
-                lset(piv, i, l, lget(pivt, i, l))
+    for i in range(nz):
+        sti(piv, i, sel(stale, ldi(pivt, i), ldi(piv, i)))
 
 
 @njit(inline='always', **_OPTS)
@@ -572,24 +633,21 @@ def _update(z, r, done, scale, nz, f, F):
 def _judge(f, F, tol, stall, refresh):
     """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol,
     or ≤ stall once the update stops halving) or on, with a fresh Jacobian next time if this
-    iteration contracted by less than ``refresh``."""
-    for l in range(nlanes(f)):
-        if lget(f, F.done, l) != 0.0:
-            continue
-        its = lget(f, F.its, l) + 1.0
-        lset(f, F.its, l, its)
-        sz = lget(f, F.norm, l)
-        prev = lget(f, F.prev, l)
-        if lget(f, F.nan, l) != 0.0 or lget(f, F.finite, l) == 0.0 or not np.isfinite(sz):
-            lset(f, F.done, l, 1.0)
-            continue
-        theta = sz / prev if np.isfinite(prev) else np.inf
-        if (sz <= tol) or (sz <= stall and np.isfinite(theta) and theta > 0.5):
-            lset(f, F.done, l, 1.0)
-            lset(f, F.ok, l, 1.0)
-            continue
-        lset(f, F.stale, l, 1.0 if np.isfinite(theta) and theta > refresh else 0.0)
-        lset(f, F.prev, l, sz)
+    iteration contracted by less than ``refresh``.  Written with masks and selects, so W lanes are
+    judged at once (the same comparisons and the one division of the scalar path, lane by lane)."""
+    on = ld(f, F.done) == 0.0
+    st(f, F.its, ld(f, F.its) + sel(on, 1.0, 0.0))
+    sz, prev = ld(f, F.norm), ld(f, F.prev)
+    failed = mor(mor(ld(f, F.nan) != 0.0, ld(f, F.finite) == 0.0), mnot(np.isfinite(sz)))
+    theta = sel(np.isfinite(prev), sz / prev, np.inf)
+    slow = mand(np.isfinite(theta), theta > 0.5)
+    converged = mand(mnot(failed), mor(sz <= tol, mand(sz <= stall, slow)))
+    ends = mand(on, mor(failed, converged))
+    goes = mand(on, mnot(ends))
+    st(f, F.done, sel(ends, 1.0, ld(f, F.done)))
+    st(f, F.ok, sel(mand(on, converged), 1.0, ld(f, F.ok)))
+    st(f, F.stale, sel(goes, sel(mand(np.isfinite(theta), theta > refresh), 1.0, 0.0), ld(f, F.stale)))
+    st(f, F.prev, sel(goes, sz, prev))
 
 
 @njit(**_OPTS)

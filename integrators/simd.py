@@ -400,6 +400,61 @@ def _lset(p, i, lane, v):
         return impl
 
 
+def ldi(p, i):
+    """Element i (all lanes) of an int64 pointer, as doubles (a Vec at W > 1): row indices that
+    compare and select like values."""
+
+
+def sti(p, i, v):
+    """Element i of an int64 pointer = v (doubles holding integers; a Vec goes lane by lane)."""
+
+
+@intrinsic
+def _lpi_load(typingctx, p, i):
+    if not (isinstance(p, LanePtr) and p.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        ptr = builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(W))])
+        vp = builder.bitcast(ptr, ir.VectorType(ir.IntType(64), W).as_pointer())
+        return builder.sitofp(builder.load(vp, align=8), ir.VectorType(ir.DoubleType(), W))
+    return Vec(p.W)(p, i), codegen
+
+
+@intrinsic
+def _lpi_store(typingctx, p, i, v):
+    if not (isinstance(p, LanePtr) and p.dtype == types.int64 and (isinstance(v, Vec) or _real(v))):
+        return None
+
+    def codegen(context, builder, sig, args):
+        W = sig.args[0].W
+        ptr = builder.gep(args[0], [builder.mul(_intp(context, builder, sig.args[1], args[1]), _W(W))])
+        vp = builder.bitcast(ptr, ir.VectorType(ir.IntType(64), W).as_pointer())
+        vec = _as_vec(context, builder, sig.args[2], args[2], W)
+        builder.store(builder.fptosi(vec, ir.VectorType(ir.IntType(64), W)), vp, align=8)
+        return context.get_dummy_value()
+    return types.void(p, i, v), codegen
+
+
+@overload(ldi, inline="never")
+def _ldi(p, i):
+    if isinstance(p, LanePtr) and p.dtype == types.int64:
+        return lambda p, i: _lpi_load(p, i)
+    if isinstance(p, types.CPointer) and p.dtype == types.int64:
+        return lambda p, i: float(p[i])
+
+
+@overload(sti, inline="never")
+def _sti(p, i, v):
+    if isinstance(p, LanePtr) and p.dtype == types.int64:
+        return lambda p, i, v: _lpi_store(p, i, v)
+    if isinstance(p, types.CPointer) and p.dtype == types.int64:
+        def impl(p, i, v):
+            p[i] = int(v)
+        return impl
+
+
 @overload(nlanes, inline="never")
 def _nlanes(p):
     if isinstance(p, (LanePtr, DDLanePtr)):
