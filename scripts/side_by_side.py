@@ -1,0 +1,158 @@
+"""The step engine at this commit against an earlier one, side by side on this machine (issue 43).
+
+    python scripts/side_by_side.py --base 083b6cf [--rounds 5] [--out docs/figures/side_by_side.json]
+
+The earlier commit is checked out into a temporary git worktree with its own numba cache; each
+round runs one child process per tree (this script with ``--measure``, ``integrators`` imported
+from that tree), alternating which goes first, and the medians over the rounds are reported.
+What a child measures, one thread, guiding_centre_symmetric at h = 10, scripts/benchmark_core.py's
+protocol (10⁴ points, 2 warm-up steps, then 10 steps in one call; best of 3):
+
+* ``loop``: the points near the default loop (Gaussian 1e-3), ``box``: the same number of points
+  spread uniformly over the loop's bounding box; point-steps per second of GLRK2-symmetric,
+  GLRK1-none, SRK3-symmetric and GLRK4-symmetric, in lanes (W = kernel.LANES);
+* ``orbit``: one trajectory (W = 1, 20,000 steps, best of 3) of GLRK1-none and GLRK2/4/6-symmetric.
+
+Both trees' states after the timed steps are written to .npz files and compared field by field:
+the rows say whether every point's bits are the same.  Flop per cycle uses the flop count of one
+Newton iteration as coded (scripts/engine_lanes.py, Jacobian refreshes left out: a lower bound)
+times the measured iterations per step, over the clock /proc/cpuinfo reports.
+"""
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+LANE_PAIRS = (("GLRK2", "symmetric"), ("GLRK1", "none"), ("SRK3", "symmetric"), ("GLRK4", "symmetric"))
+ORBIT_PAIRS = (("GLRK1", "none"), ("GLRK2", "symmetric"), ("GLRK4", "symmetric"), ("GLRK6", "symmetric"))
+FIELDS = ("q", "p", "Lam", "iterations", "breakdown_time")
+
+
+def point_sets(n=10000):
+    import invariants
+    rng = np.random.default_rng(1)
+    q0 = invariants.loop("guiding_centre", n)
+    lo, hi = q0.min(0), q0.max(0)
+    return {"loop": q0 + 1e-3 * rng.standard_normal(q0.shape), "box": lo + (hi - lo) * rng.random(q0.shape)}
+
+
+def measure(dump):
+    """Runs in a child, with integrators from the tree under test: rates as JSON on stdout."""
+    import integrators
+    from integrators import kernel
+    from integrators.engine import set_threads
+    set_threads(1)
+    gc = integrators.system("guiding_centre_symmetric")
+    sets = point_sets()
+    out, states = {}, {}
+
+    def rate(tab, proj, q, steps, lanes):
+        eng = integrators.Engine(gc, integrators.tableau(tab), proj, 10.0)
+        best, its = 0.0, 0.0
+        for _ in range(3):
+            st = eng.state(q)
+            eng.advance(st, 1, 2, lanes=lanes)
+            i0 = st.iterations.sum()
+            t = time.perf_counter()
+            eng.advance(st, 3, steps, lanes=lanes)
+            best = max(best, q.shape[0] * steps / (time.perf_counter() - t))
+            its = (st.iterations.sum() - i0) / (q.shape[0] * steps)
+        return best, float(its), st
+
+    for tab, proj in LANE_PAIRS:
+        for name, q in sets.items():
+            r, its, st = rate(tab, proj, q, 10, kernel.LANES)
+            out[f"{tab}-{proj} {name}"] = dict(rate=r, iterations=its)
+            for f in FIELDS:
+                states[f"{tab}-{proj} {name}/{f}"] = getattr(st, f)
+    for tab, proj in ORBIT_PAIRS:
+        r, its, st = rate(tab, proj, sets["loop"][:1], 20000, 1)
+        out[f"{tab}-{proj} orbit"] = dict(rate=r, iterations=its)
+        for f in FIELDS:
+            states[f"{tab}-{proj} orbit/{f}"] = getattr(st, f)
+    np.savez(dump, **states)
+    print(json.dumps(out))
+
+
+def flops(tab, proj):
+    """Flop of one step as coded, per point, at the measured iterations (filled in by the caller)."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    import integrators
+    from engine_lanes import flops_per_iteration
+    gc = integrators.system("guiding_centre_symmetric")
+    t = integrators.tableau(tab)
+    return flops_per_iteration(gc, t, integrators.Engine(gc, t, proj, 10.0))
+
+
+def clock_hz():
+    try:
+        return 1e6 * max(float(ln.split(":")[1]) for ln in open("/proc/cpuinfo") if ln.startswith("cpu MHz"))
+    except (OSError, ValueError):
+        return float("nan")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", required=True, help="the earlier commit")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--out", default=str(ROOT / "docs/figures/side_by_side.json"))
+    ap.add_argument("--measure", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.measure:
+        return measure(args.measure)
+    tmp = Path(tempfile.mkdtemp())
+    base = tmp / "base"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), args.base], check=True,
+                   capture_output=True)
+    trees = {"base": base, "this": ROOT}
+    runs = {k: [] for k in trees}
+    try:
+        for r in range(args.rounds):
+            order = list(trees) if r % 2 == 0 else list(trees)[::-1]
+            for key in order:
+                env = dict(os.environ, PYTHONPATH=str(trees[key]))
+                env.pop("NUMBA_CACHE_DIR", None)
+                p = subprocess.run([sys.executable, __file__, "--base", args.base, "--measure", str(tmp / f"{key}.npz")],
+                                   env=env, capture_output=True, text=True, check=True, cwd=str(trees[key]))
+                runs[key].append(json.loads(p.stdout.strip().splitlines()[-1]))
+                print(f"round {r + 1}: {key} done", flush=True)
+        a, b = np.load(tmp / "base.npz"), np.load(tmp / "this.npz")
+        same = {k.split("/")[0]: True for k in a}
+        for k in a:
+            same[k.split("/")[0]] &= bool(np.array_equal(a[k], b[k], equal_nan=True))
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], capture_output=True)
+    hz = clock_hz()
+    rows = []
+    for key in runs["this"][0]:
+        before = float(np.median([r[key]["rate"] for r in runs["base"]]))
+        after = float(np.median([r[key]["rate"] for r in runs["this"]]))
+        its = runs["this"][0][key]["iterations"]
+        tab, rest = key.split("-", 1)
+        proj = rest.split()[0]
+        fl = flops(tab, proj) * its
+        rows.append(dict(case=key, before=before, after=after, ratio=after / before, iterations=its,
+                         flop_per_step=fl, flop_per_cycle_before=fl * before / hz, flop_per_cycle_after=fl * after / hz,
+                         bits_equal=same[key], rounds_before=[r[key]["rate"] for r in runs["base"]],
+                         rounds_after=[r[key]["rate"] for r in runs["this"]]))
+        print(f"{key:28s} {before:12,.0f} -> {after:12,.0f}  x{after / before:5.2f}  it {its:.2f}  "
+              f"flop/cycle {fl * before / hz:.2f} -> {fl * after / hz:.2f}  bits {'equal' if same[key] else 'DIFFER'}")
+    out = dict(machine=platform.processor() or platform.machine(), clock_hz=hz, base=args.base,
+               this=subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                   text=True).stdout.strip(), rounds=args.rounds, date=time.strftime("%Y-%m-%d"),
+               command=f"python scripts/side_by_side.py --base {args.base} --rounds {args.rounds}", rows=rows)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=1))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
