@@ -213,7 +213,7 @@ def theta_dd(system, q2):
     n, d = q2.shape[:2]
     out = np.zeros_like(q2)
     ev, _ = point_functions(system, precision="double-double")
-    k = np.array([float(v) for v in system.params.values()] or [0.0], dtype=np.float64)
+    k = system.param_vector()
     from .kernel import theta_dd_points
     theta_dd_points(ev, k, q2, out, np.zeros(2 * d * d), np.zeros(2 * d * d * d), np.zeros(2 * d), np.zeros(2 * d * d))
     return out
@@ -224,7 +224,7 @@ def scalars_dd(system, q2):
     (n, 2, 2), [:, 0] H and [:, 1] the momentum as (hi, lo) pairs."""
     q2 = np.ascontiguousarray(q2, dtype=np.float64)
     out = np.zeros((q2.shape[0], 2, 2))
-    k = np.array([float(v) for v in system.params.values()] or [0.0], dtype=np.float64)
+    k = system.param_vector()
     from .kernel import scalars_dd_points
     scalars_dd_points(_load(system, "double-double").scalars_dd, k, q2, out)
     return out
@@ -252,7 +252,7 @@ class Engine:
         lob = tableau.d is not None
         self.plan = kernel.Plan(*rec.codes(tableau), lob)
         self.nz = (s + (1 if rec.coupled else 0) + (1 if lob else 0)) * d
-        self.k = np.array([float(v) for v in system.params.values()], dtype=np.float64)
+        self.k = system.param_vector()
         self.tolerances = tolerances if tolerances is not None else Tolerances()
         if not isinstance(self.tolerances, Tolerances):
             raise ValueError(f"tolerances must be an integrators.engine.Tolerances, got {type(tolerances).__name__}")

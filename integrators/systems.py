@@ -24,13 +24,17 @@ import sympy
 from .codegen import _Printer
 
 
-def _compile(exprs, shape, qsyms, params, name):
-    """Compile sympy expressions into ``f(q) -> array of shape q.shape[:-1] + shape``."""
-    flat = list(exprs)
+def _compile(exprs, shape, qsyms, params, name, data=None):
+    """Compile sympy expressions into ``f(q) -> array of shape q.shape[:-1] + shape``; ``data``:
+    the system's spline fields (integrators/splines.py), which the expressions may use."""
+    from .codegen import field_prelude
+    flat, prelude, fnames = field_prelude(list(exprs), qsyms, params, 4,
+                                          lambda s, X, Y: f"_field_np(_DATA, {s}, {X}, {Y})")
     subs, reduced = sympy.cse(flat, symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
                               optimizations="basic")
     names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
     names.update({k: f"_k{i}" for i, k in enumerate(params)})
+    names.update(fnames)
     names.update({sym: f"_x{i}" for i, (sym, _) in enumerate(subs)})
     printer = _Printer(names)
     lines = [f"def {name}(_qin):"]
@@ -42,6 +46,7 @@ def _compile(exprs, shape, qsyms, params, name):
     lines.append(f"    _out = numpy.zeros(_qin.shape[:-1] + {tuple(shape)!r}, dtype=_qin.dtype)")
     for i, s in enumerate(qsyms):
         lines.append(f"    {names[s]} = _qin[..., {i}]")
+    lines += prelude
     for sym, e in subs:
         lines.append(f"    {names[sym]} = {printer.doprint(e)}")
     for idx, e in zip(itertools.product(*[range(n) for n in shape]), reduced):
@@ -52,6 +57,9 @@ def _compile(exprs, shape, qsyms, params, name):
     lines.append("    return _out")
     src = "\n".join(lines)
     namespace = {"numpy": np, **{f"_K{i}": float(v) for i, v in enumerate(params.values())}}
+    if prelude:
+        from .splines import field_np
+        namespace.update(_field_np=field_np, _DATA=data)
     exec(compile(src, f"<generated {name}>", "exec"), namespace)
     fn = namespace[name]
     fn.source = src
@@ -101,8 +109,15 @@ class System:
     """
 
     def __init__(self, name, q, theta, H, params=None, symmetry=None, domain=(), defaults=None,
-                 momentum_name=None, flow=None, momentum=None):
+                 momentum_name=None, flow=None, momentum=None, fields=(), source=None):
         self.name = name
+        self.fields = tuple(fields)         # spline fields ϑ and H may use (integrators/splines.py)
+        self.source = source                # where the fields came from (an equilibrium file), or None
+        if self.fields:
+            from .splines import pack
+            self.data = pack(self.fields)
+        else:
+            self.data = np.zeros(0)
         self._flow = flow
         self.q = tuple(q)
         self.d = len(self.q)
@@ -180,7 +195,13 @@ class System:
         return self
 
     def _fn(self, name, exprs, shape):
-        return _compile(exprs, shape, self.q, self.params, name)
+        return _compile(exprs, shape, self.q, self.params, name, self.data)
+
+    def param_vector(self):
+        """What every compiled point function receives as ``k``: the parameter values in order, then
+        the fields' data (nothing for a system without fields); never empty."""
+        v = np.concatenate([np.array([float(x) for x in self.params.values()], dtype=np.float64), self.data])
+        return v if v.size else np.zeros(1)
 
     # -- compiled functions ---------------------------------------------------
     @functools.cached_property
@@ -266,7 +287,7 @@ class System:
             new[by_name[key]] = float(val)
         return System(self.name, self.q, self.theta_expr, self.H_expr, new, self.symmetry, self.domain_expr,
                       self.defaults, self.momentum_name, self._flow,
-                      None if self.symmetry is not None else self.momentum_expr)
+                      None if self.symmetry is not None else self.momentum_expr, self.fields, self.source)
 
     @property
     def has_exact_flow(self) -> bool:

@@ -190,7 +190,7 @@ def _compiled_integrands(system, q, lam, qs, qt, ls, lt, h, paper_sign, correcte
     n = q.shape[0] * q.shape[1]
     zero = np.zeros((n, d))
     nc, co = np.empty(n), np.empty(n)
-    k = np.array([float(v) for v in system.params.values()] or [0.0])
+    k = system.param_vector()
     _omega_integrands(ev, k, flat(q), flat(lam) if corrected else zero, flat(qs), flat(qt),
                       flat(ls) if corrected else zero, flat(lt) if corrected else zero, float(h or 0.0) ** 2,
                       -1.0 if paper_sign else 1.0, corrected, nc, co, np.empty(d), np.empty(d * d),

@@ -212,7 +212,7 @@ def dd_difference(a, b):
 
 
 def _params(system):
-    return np.array([float(v) for v in system.params.values()] or [0.0])
+    return system.param_vector()
 
 
 def _scalars(system, q):
