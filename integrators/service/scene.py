@@ -20,6 +20,11 @@ A scene file::
     function = "mysys.py:make"            # (or module:function; top-level system = "..." says the same)
     params = { omega = 2.0 }              # passed to it as keyword arguments
 
+    [system]                              # ... or guiding centres in a tokamak equilibrium (docs/equilibria.md)
+    equilibrium = "eq.geqdsk"             # a G-EQDSK file, next to the scene or in the current directory
+    cocos = 3                             # its sign conventions (COCOS index; default 3)
+    params = { mu = 1e-5 }                # the magnetic moment (default from the plasma's size and field)
+
     [loop]                                # optional: a closed loop of sample points
     shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function": called as
                                           # f(tau, **params), tau the (N,) array j/N in [0, 1), returning (N, d)
@@ -331,7 +336,7 @@ def _shape(spec, key, base=None):
 _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
     "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
-               "momentum": str, "domain": list, "function": str},
+               "momentum": str, "domain": list, "function": str, "equilibrium": str, "cocos": int},
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
@@ -445,6 +450,10 @@ def _finite(v) -> bool:
 
 def _system_of(sysd, base):
     """[system]: (the System, its parameters, the user system's spec or {})."""
+    if "equilibrium" in sysd:
+        return _equilibrium_of(sysd, base)
+    if "cocos" in sysd:
+        raise SceneError("system.cocos belongs to system.equilibrium (a G-EQDSK file)")
     user = any(k in sysd for k in ("coordinates", "function"))
     if not user:
         if "name" not in sysd:
@@ -466,6 +475,27 @@ def _system_of(sysd, base):
             raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
     spec = {k: v for k, v in sysd.items() if k != "params"} if user else {}
     return _make_system(spec or {"name": sysd["name"]}, params, base), params, spec
+
+
+def _equilibrium_of(sysd, base):
+    """[system] equilibrium = "file.geqdsk" (looked up next to the scene, then in the current
+    directory), cocos = N, params = {mu = …}: the guiding centre in that equilibrium
+    (integrators.equilibrium).  The file is data: it is read, never run."""
+    for k in ("name", "coordinates", "theta", "H", "symmetry", "momentum", "domain", "function"):
+        if k in sysd:
+            raise SceneError(f"system.{k} cannot go with system.equilibrium (the file brings the system)")
+    e = sysd["equilibrium"]
+    p = Path(e)
+    cands = [p] if p.is_absolute() else [*([Path(base) / p] if base else []), Path.cwd() / p]
+    found = next((c for c in cands if c.is_file()), None)
+    if found is None:
+        raise SceneError(f"system.equilibrium: file '{e}' not found (looked in {', '.join(str(c.parent) for c in cands)})")
+    params = dict(sysd.get("params", {}))
+    for k, v in params.items():
+        if not _finite(v):
+            raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
+    spec = {"equilibrium": str(found.resolve()), "cocos": sysd.get("cocos")}
+    return _make_system(spec, params, base), params, spec
 
 
 def _sets_of(data):
@@ -551,7 +581,19 @@ def step_map_label(spec):
 
 
 def _make_system(spec, params, base):
-    """A System from a scene's [system] table: built-in by name, from ϑ and H, or a user function."""
+    """A System from a scene's [system] table: built-in by name, from ϑ and H, a user function, or
+    an equilibrium file."""
+    if "equilibrium" in spec:
+        from ..equilibrium import DEFAULT_COCOS, EquilibriumError, system_from_geqdsk
+        rest = {k: v for k, v in params.items() if k != "mu"}
+        try:
+            made = system_from_geqdsk(spec["equilibrium"], mu=params.get("mu", None),
+                                      cocos=DEFAULT_COCOS if spec.get("cocos") is None else spec["cocos"])
+            return made.with_params(**rest) if rest else made
+        except EquilibriumError as exc:
+            raise SceneError(f"system.equilibrium: {exc}") from None
+        except ValueError as exc:
+            raise SceneError(f"system.params: {exc}") from None
     if "function" in spec:
         from .plugins import load_callable
         from ..systems import System
