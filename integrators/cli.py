@@ -263,6 +263,8 @@ def cmd_run(args) -> int:
                   "where H0 = 0 (a relative error has no scale there), |H − H0|/|H0| elsewhere")
         if note:
             print(f"note: {note}")
+        if scene.system_spec.get("equilibrium"):
+            print(_equilibrium_note(scene))
         if scene.precision == "double-double":
             print("note: run in double-double (run.precision): the states, checkpoints and the energy, momentum and "
                   "constraint errors are double-double; the invariants are computed from the states rounded to "
@@ -270,6 +272,21 @@ def cmd_run(args) -> int:
         _print_user_code()
         return code
     return EXIT_OK
+
+
+def _equilibrium_note(scene) -> str:
+    """What the summary says of a system read from an equilibrium file: the file, its digest, the
+    conventions assumed and the check against the file's q (docs/equilibria.md)."""
+    sy = scene.system()
+    spec = scene.system_spec
+    q = sy.defaults.get("q_check")
+    qtext = (f"|q(ψ_N = 0.5)| {q[0]:.4g} from the field against {q[1]:.4g} in the file" if q
+             else "the file has no q to check against")
+    from .equilibrium import DEFAULT_COCOS
+    cocos = spec.get("cocos") or DEFAULT_COCOS
+    return (f"note: the field is the quintic-spline interpolant of {_printable(spec['equilibrium'])} "
+            f"(sha256 {spec['sha256'][:12]}…), read as COCOS {cocos}; {qtext}; points leaving ψ_N < 1 break "
+            "down (docs/equilibria.md)")
 
 
 def _energy_absolute_points(path) -> int:

@@ -47,7 +47,8 @@ def test_importing_the_core_loads_neither_service_nor_audit():
 # the import names of the third-party packages the code imports, and the distributions that provide them
 DISTRIBUTION = {"chebpy": "chebfun", "pyfftw": "pyfftw", "mpi4py": "mpi4py", "h5py": "h5py", "numpy": "numpy",
                 "scipy": "scipy", "sympy": "sympy", "mpmath": "mpmath", "numba": "numba", "llvmlite": "llvmlite",
-                "matplotlib": "matplotlib", "xarray": "xarray", "tqdm": "tqdm", "ipywidgets": "ipywidgets"}
+                "matplotlib": "matplotlib", "xarray": "xarray", "tqdm": "tqdm", "ipywidgets": "ipywidgets",
+                "freeqdsk": "freeqdsk"}
 
 
 def _top_imports(folder):

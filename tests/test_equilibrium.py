@@ -349,3 +349,28 @@ path = "{tmp_path / 'eq.h5'}"
         with pytest.raises(SceneError) as e:
             parse_scene(text.replace(old, new), str(scene_path))
         assert say in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_the_summary_names_the_file_and_a_changed_file_is_no_resume(tmp_path, capsys):
+    """poincare run on a scene naming an equilibrium: the summary's note names the file, its digest,
+    the COCOS and the q check; a resume after the file changed (one digit of ψ) is refused in one
+    line naming [system], while a resume of the unchanged file from another folder is accepted."""
+    from integrators.cli import main as cli_main
+    shutil.copy(SHIPPED, tmp_path / "eq.geqdsk")
+    scene = tmp_path / "eq.toml"
+    scene.write_text((Path(integrators.__file__).parent / "service" / "scenes" / "freegs_dn.toml").read_text()
+                     .replace('"freegs_dn.geqdsk"', '"eq.geqdsk"').replace("steps = 1000", "steps = 20")
+                     .replace('path = "freegs_dn.h5"', f'path = "{tmp_path / "eq.h5"}"'))
+    out = tmp_path / "eq.h5"
+    assert cli_main(["run", str(scene), "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "quintic-spline interpolant of eq.geqdsk" in said and "COCOS 3" in said and "|q(ψ_N = 0.5)|" in said
+    assert cli_main(["run", str(scene), "-o", str(out), "--resume", "--steps", "30", "-q"]) == 0
+    capsys.readouterr()
+    lines = (tmp_path / "eq.geqdsk").read_text().splitlines(keepends=True)
+    row = 20                               # inside the ψ block: change the last digit of its first number
+    lines[row] = lines[row][:15] + ("1" if lines[row][15] != "1" else "2") + lines[row][16:]
+    (tmp_path / "eq.geqdsk").write_text("".join(lines))
+    assert cli_main(["run", str(scene), "-o", str(out), "--resume", "--steps", "40", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "system" in err, err

@@ -146,6 +146,10 @@ def _resume_plan(path, scene):
         old = dataclasses.replace(old, steps=steps)
     diff = scene_differences(old, scene)
     for label, digest in resumable.read_tableau_digests(path).items():
+        if label is None and scene.system_spec.get("sha256") != digest:
+            raise ValueError(f"cannot resume '{path}': the scene's [system] equilibrium file "
+                             f"'{scene.system_spec.get('equilibrium')}' is not the file the run was started with "
+                             "(its sha256 differs)")
         if label in scene.tableau_files and scene.tableau(label).digest != digest:
             raise ValueError(f"cannot resume '{path}': tableau file '{scene.tableau_files[label]}' ({label}) "
                              "has other coefficients than the run was started with")

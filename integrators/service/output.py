@@ -111,6 +111,8 @@ def _layout(f, scene, version, npoints, state_shapes, threshold):
     f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     if scene.tableau_files:                 # a resume must find the same coefficients, not only the name
         f.attrs["tableau_digests"] = json.dumps({t: scene.tableau(t).digest for t in scene.tableau_files})
+    if scene.system_spec.get("sha256"):     # ... and the same equilibrium file (docs/equilibria.md)
+        f.attrs["equilibrium_sha256"] = scene.system_spec["sha256"]
     runs = f.create_group("runs")
     for pair in scene.pairs:
         g = runs.create_group(pair.name)

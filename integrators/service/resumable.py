@@ -26,10 +26,14 @@ def read_scene_text(path):
 
 
 def read_tableau_digests(path) -> dict:
-    """{label: Tableau.digest} of the tableau files a run was started with ({} for none / older files)."""
+    """{label: Tableau.digest} of the tableau files a run was started with ({} for none / older files),
+    and under the key ``None`` the sha256 of its equilibrium file, if it read one."""
     try:
         with open_file(path) as f:
-            return json.loads(f.attrs.get("tableau_digests", "{}"))
+            out = json.loads(f.attrs.get("tableau_digests", "{}"))
+            if "equilibrium_sha256" in f.attrs:
+                out[None] = str(f.attrs["equilibrium_sha256"])
+            return out
     except (OSError, KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, (DamagedFile, BusyFile)):
             raise

@@ -484,18 +484,28 @@ def _equilibrium_of(sysd, base):
     for k in ("name", "coordinates", "theta", "H", "symmetry", "momentum", "domain", "function"):
         if k in sysd:
             raise SceneError(f"system.{k} cannot go with system.equilibrium (the file brings the system)")
+    import hashlib
     e = sysd["equilibrium"]
+    found = _equilibrium_file(e, base)
+    params = dict(sysd.get("params", {}))
+    for k, v in params.items():
+        if not _finite(v):
+            raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
+    # the file's digest belongs to the scene: a resume compares it (a changed file is another field),
+    # not where the file lies, which may differ between a run and its resume
+    spec = {"equilibrium": e, "cocos": sysd.get("cocos"), "sha256": hashlib.sha256(found.read_bytes()).hexdigest()}
+    return _make_system(spec, params, base), params, spec
+
+
+def _equilibrium_file(e, base):
+    """The path of system.equilibrium: as given if absolute, else next to the scene, then in the
+    current directory."""
     p = Path(e)
     cands = [p] if p.is_absolute() else [*([Path(base) / p] if base else []), Path.cwd() / p]
     found = next((c for c in cands if c.is_file()), None)
     if found is None:
         raise SceneError(f"system.equilibrium: file '{e}' not found (looked in {', '.join(str(c.parent) for c in cands)})")
-    params = dict(sysd.get("params", {}))
-    for k, v in params.items():
-        if not _finite(v):
-            raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
-    spec = {"equilibrium": str(found.resolve()), "cocos": sysd.get("cocos")}
-    return _make_system(spec, params, base), params, spec
+    return found
 
 
 def _sets_of(data):
@@ -587,7 +597,7 @@ def _make_system(spec, params, base):
         from ..equilibrium import DEFAULT_COCOS, EquilibriumError, system_from_geqdsk
         rest = {k: v for k, v in params.items() if k != "mu"}
         try:
-            made = system_from_geqdsk(spec["equilibrium"], mu=params.get("mu", None),
+            made = system_from_geqdsk(_equilibrium_file(spec["equilibrium"], base), mu=params.get("mu", None),
                                       cocos=DEFAULT_COCOS if spec.get("cocos") is None else spec["cocos"])
             return made.with_params(**rest) if rest else made
         except EquilibriumError as exc:
