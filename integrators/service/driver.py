@@ -145,11 +145,12 @@ def _resume_plan(path, scene):
     if steps is not None:
         old = dataclasses.replace(old, steps=steps)
     diff = scene_differences(old, scene)
-    for label, digest in resumable.read_tableau_digests(path).items():
-        if label is None and scene.system_spec.get("sha256") != digest:
-            raise ValueError(f"cannot resume '{path}': the scene's [system] equilibrium file "
-                             f"'{scene.system_spec.get('equilibrium')}' is not the file the run was started with "
-                             "(its sha256 differs)")
+    tableaus, equilibrium = resumable.read_input_digests(path)
+    if equilibrium is not None and scene.system_spec.get("sha256") != equilibrium:
+        raise ValueError(f"cannot resume '{path}': the scene's [system] equilibrium file "
+                         f"'{scene.system_spec.get('equilibrium')}' is not the file the run was started with "
+                         "(its sha256 differs)")
+    for label, digest in tableaus.items():
         if label in scene.tableau_files and scene.tableau(label).digest != digest:
             raise ValueError(f"cannot resume '{path}': tableau file '{scene.tableau_files[label]}' ({label}) "
                              "has other coefficients than the run was started with")

@@ -25,19 +25,17 @@ def read_scene_text(path):
         raise DamagedFile(f"cannot read '{path}': damaged or not an HDF5 run file ({plain_error(exc)})") from None
 
 
-def read_tableau_digests(path) -> dict:
-    """{label: Tableau.digest} of the tableau files a run was started with ({} for none / older files),
-    and under the key ``None`` the sha256 of its equilibrium file, if it read one."""
+def read_input_digests(path) -> tuple:
+    """What a run's input files were: ({label: Tableau.digest} of its tableau files ({} for none /
+    older files), the sha256 of its equilibrium file or None)."""
     try:
         with open_file(path) as f:
-            out = json.loads(f.attrs.get("tableau_digests", "{}"))
-            if "equilibrium_sha256" in f.attrs:
-                out[None] = str(f.attrs["equilibrium_sha256"])
-            return out
+            eq = f.attrs.get("equilibrium_sha256")
+            return json.loads(f.attrs.get("tableau_digests", "{}")), (None if eq is None else str(eq))
     except (OSError, KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, (DamagedFile, BusyFile)):
             raise
-        raise DamagedFile(f"'{path}' is damaged: cannot read its tableau digests ({plain_error(exc)})") from None
+        raise DamagedFile(f"'{path}' is damaged: cannot read its input files' digests ({plain_error(exc)})") from None
 
 
 def check_resumable(path, scene):

@@ -486,7 +486,7 @@ def _equilibrium_of(sysd, base):
             raise SceneError(f"system.{k} cannot go with system.equilibrium (the file brings the system)")
     import hashlib
     e = sysd["equilibrium"]
-    found = _equilibrium_file(e, base)
+    found = _data_file(e, base, "system.equilibrium: file")
     params = dict(sysd.get("params", {}))
     for k, v in params.items():
         if not _finite(v):
@@ -497,14 +497,14 @@ def _equilibrium_of(sysd, base):
     return _make_system(spec, params, base), params, spec
 
 
-def _equilibrium_file(e, base):
-    """The path of system.equilibrium: as given if absolute, else next to the scene, then in the
-    current directory."""
+def _data_file(e, base, what):
+    """A data file a scene names (a tableau, an equilibrium): the path as given if absolute, else next
+    to the scene, then in the current directory; a one-line error, "``what`` 'e' not found", if none exists."""
     p = Path(e)
     cands = [p] if p.is_absolute() else [*([Path(base) / p] if base else []), Path.cwd() / p]
     found = next((c for c in cands if c.is_file()), None)
     if found is None:
-        raise SceneError(f"system.equilibrium: file '{e}' not found (looked in {', '.join(str(c.parent) for c in cands)})")
+        raise SceneError(f"{what} '{e}' not found (looked in {', '.join(str(c.parent) for c in cands)})")
     return found
 
 
@@ -597,7 +597,8 @@ def _make_system(spec, params, base):
         from ..equilibrium import DEFAULT_COCOS, EquilibriumError, system_from_geqdsk
         rest = {k: v for k, v in params.items() if k != "mu"}
         try:
-            made = system_from_geqdsk(_equilibrium_file(spec["equilibrium"], base), mu=params.get("mu", None),
+            made = system_from_geqdsk(_data_file(spec["equilibrium"], base, "system.equilibrium: file"),
+                                      mu=params.get("mu", None),
                                       cocos=DEFAULT_COCOS if spec.get("cocos") is None else spec["cocos"])
             return made.with_params(**rest) if rest else made
         except EquilibriumError as exc:
@@ -685,12 +686,7 @@ def _tableaus(entries, base):
         if not isinstance(e, str):
             raise SceneError(f"'run.tableaus' must be a list of strings, got {e!r}")
         if e.endswith(".toml"):
-            p = Path(e)
-            cands = [p] if p.is_absolute() else [*([Path(base) / p] if base else []), Path.cwd() / p]
-            found = next((c for c in cands if c.is_file()), None)
-            if found is None:
-                raise SceneError(f"run.tableaus: tableau file '{e}' not found "
-                                 f"(looked in {', '.join(str(c.parent) for c in cands)})")
+            found = _data_file(e, base, "run.tableaus: tableau file")
             label = _tableau_file(found).name
             if not label or "/" in label or label in SYSTEM_NAMES or not label.isprintable():
                 raise SceneError(f"run.tableaus: '{e}' has the unusable name {label!r}")
