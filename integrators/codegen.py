@@ -60,12 +60,18 @@ class _Printer(NumPyPrinter):
 
 
 def _key(system) -> str:
-    """Hash of what the generated source depends on: coordinates, parameter order, ϑ, H, domain."""
+    """Hash of what the generated source depends on: coordinates, parameter order, ϑ, H, domain, the
+    lane width."""
     import numba
     import sympy
+    from .kernel import LANES
     parts = [CODEGEN_VERSION, numba.__version__, sys.version.split()[0],
              sympy.srepr(tuple(system.q)), sympy.srepr(tuple(system.params)),
              sympy.srepr(tuple(system.theta_expr)), sympy.srepr(system.H_expr), sympy.srepr(tuple(system.domain_expr))]
+    if LANES != 8:
+        # the lane functions are compiled for W = LANES: another width is another module (8, the
+        # width every cached module was made for, adds nothing, so those keys stay as they were)
+        parts.append(f"lanes {LANES}")
     if getattr(system, "fields", ()):
         # the generated module compiles integrators/splines.py's evaluation into its own functions,
         # and numba's cache checks only the module's file: a changed splines.py is a new key

@@ -23,6 +23,7 @@ import math
 import os
 import sys
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,6 +31,17 @@ from .codegen import _load, point_functions
 from .projections import admission, projection_record
 
 BLOCK = 64                     # points per block of the kernel's thread loop (any value gives the same bits)
+
+
+class LaneUse(NamedTuple):
+    """What one :meth:`Engine.advance` call asked of the lanes: ``W`` points a group, ``rounds`` group
+    steps and ``iterations`` the Newton iterations they ran, summed over the blocks.  The point-steps
+    the call made (the rise of ``State.steps``) over W · rounds is the share of lane steps that did
+    work (1: no lane ever idled); the points' iterations (the rise of ``State.iterations``) over
+    W · iterations that of lane iterations (a lane that converged waits for its group's slowest)."""
+    W: int
+    rounds: int
+    iterations: int
 
 CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
                      "iterations", "steps")
@@ -291,7 +303,8 @@ class Engine:
         """Steps number first … first + nsteps − 1 (step k aims at t0 + k·h) for every live point.
 
         ``lanes``: W, points advanced together in SIMD lanes (1 or kernel.LANES; None: LANES for
-        real states of at least LANES points).  Any choice gives the same bits."""
+        real states of at least LANES points).  Any choice gives the same bits.  Returns the
+        :class:`LaneUse` of the call (how many group steps the lanes took)."""
         from . import kernel
         W = lanes if lanes is not None else (kernel.LANES if state.q.shape[0] >= kernel.LANES else 1)
         if W not in (1, kernel.LANES):
@@ -305,10 +318,11 @@ class Engine:
                     W = 1
                 self._functions[key] = ev, inside, W
             ev, inside, W = self._functions[key]
+            rounds = self._rounds(state, block)
             kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
                            int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
-                           (0.0,) * W, self._layout())
-            return
+                           (0.0,) * W, self._layout(), rounds)
+            return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
         cplx = bool(np.iscomplexobj(state.q))
         if cplx:
             W = 1
@@ -320,8 +334,17 @@ class Engine:
                 W = 1
             self._functions[key] = ev, inside, W
         ev, inside, W = self._functions[key]
+        rounds = self._rounds(state, block)
         kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
-                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W, self._layout())
+                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W, self._layout(),
+                       rounds)
+        return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
+
+    @staticmethod
+    def _rounds(state, block):
+        if int(block) < 1:
+            raise ValueError(f"block must be a positive number of points, got {block!r}")
+        return np.zeros((-(-state.q.shape[0] // int(block)), 2), dtype=np.int64)
 
 
 class MapEngine:

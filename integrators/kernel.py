@@ -39,8 +39,8 @@ from numba.extending import overload
 
 from .ddouble import DDType, dd
 
-from .simd import DDVec, LanePtr, _at, anyl, at, elem, elem3, is_complex, ld, lget, lanes, lset, mand, mnot, mor, nlanes, \
-    ldi, plain, put, put3, raw, re, sel, st, sti, step_measure
+from .simd import DDVec, LanePtr, _at, anyl, at, elem, elem3, is_complex, ld, ldi, lget, lanes, lmask, lset, mand, \
+    mnot, mor, nlanes, plain, put, put3, raw, re, sel, st, sti, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
 
@@ -150,10 +150,13 @@ Flags = namedtuple("Flags", [
     "scale", "pscale",            # every unknown relative to its coordinate's size (nz, d)
     "done", "ok", "stale", "prev", "its", "norm", "nan", "finite",   # Newton's per-lane bookkeeping
     "have", "hist", "live", "active", "okstep", "tbrk", "itn", "stp",   # the points' step flags
+    "jn",                         # the steps a lane's point has taken in this call
+    "held",                       # whether the lane holds a point (IntScratch.pt)
+    "gits",                       # (lane 0) the Newton iterations the group has run
     "size"])
 Flags.__doc__ = "Offsets of the per-lane real (never complex) bookkeeping."
 
-IntScratch = namedtuple("IntScratch", "piv pivt ipiv size")
+IntScratch = namedtuple("IntScratch", "piv pivt ipiv pt size")
 
 
 D_VECTORS = Scratch._fields[Scratch._fields.index("qbar"):Scratch._fields.index("qr") + 1]
@@ -181,7 +184,7 @@ def layout(s, d, nz):
         z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd, zero=d,
         q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz))
     F = _offsets(Flags, dict(scale=nz, pscale=d, **dict.fromkeys(Flags._fields[2:-1], 1)))
-    IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d))
+    IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d, pt=1))
     return S, F, IP
 
 
@@ -697,6 +700,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
             if W > 1:                             # every lane factorised, the lanes that asked keep theirs
                 _keep_factors(LU, piv, Jt, pivt, stale, nz)
         lu_solve(LU, piv, r, nz)                  # r is now −δ
+        lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         _update(z, r, done, scale, nz, f, F)
         _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh)
     for l in range(W):                            # lanes out of iterations
@@ -927,72 +931,92 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
     return anyl(good)
 
 
-@njit(**_OPTS)
-def _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP):
-    """The state of points pt0 … pt0 + nl − 1 into the lanes (lanes past nl copy the first point and
-    stay dead)."""
+@njit(inline='always', **_OPTS)
+def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
+    """The state of point ``pt`` into lane ``l``; ``valid`` False leaves the lane empty (it holds
+    the point's values, so that its arithmetic stays on ordinary numbers, but it is not live and
+    has no factors)."""
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
     hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
-    for l in range(W):
-        pt = pt0 + (l if l < nl else 0)
+    for m in range(d):
+        lset(w, S.q + m, l, elem(q, pt, m))
+        lset(w, S.p + m, l, elem(p, pt, m))
+        lset(w, S.lam + m, l, elem(Lam, pt, m))
+        lset(w, S.qc + m, l, elem(qc, pt, m))
+        lset(w, S.pc + m, l, elem(pc, pt, m))
+        lset(w, S.mu + m, l, elem(mu, pt, m))
+    for i in range(s):
         for m in range(d):
-            lset(w, S.q + m, l, elem(q, pt, m))
-            lset(w, S.p + m, l, elem(p, pt, m))
-            lset(w, S.lam + m, l, elem(Lam, pt, m))
-            lset(w, S.qc + m, l, elem(qc, pt, m))
-            lset(w, S.pc + m, l, elem(pc, pt, m))
-            lset(w, S.mu + m, l, elem(mu, pt, m))
-        for i in range(s):
-            for m in range(d):
-                lset(w, S.Y + i * d + m, l, elem3(Y, pt, i, m))
-        valid = have[pt] != 0 and l < nl          # factors kept from the last step
-        for i in range(nz):
-            for j in range(nz):
-                lset(w, S.lu + i * nz + j, l, sel(valid, elem3(lu, pt, i, j), 0.0))
-            # (a lane's solve runs whether or not its factors are used: its pivots must be rows)
-            lset(ip, IP.piv + i, l, piv[pt, i] if valid else i)
-        lset(f, F.have, l, float(have[pt]))
-        lset(f, F.hist, l, float(hist[pt]))
-        lset(f, F.live, l, float(live[pt]) if l < nl else 0.0)
-        lset(f, F.tbrk, l, tbrk[pt])
-        lset(f, F.itn, l, 0.0)
-        lset(f, F.stp, l, 0.0)
+            lset(w, S.Y + i * d + m, l, elem3(Y, pt, i, m))
+    known = have[pt] != 0 and valid           # factors kept from the last step
+    for i in range(nz):
+        for j in range(nz):
+            lset(w, S.lu + i * nz + j, l, sel(known, elem3(lu, pt, i, j), 0.0))
+        # (a lane's solve runs whether or not its factors are used: its pivots must be rows)
+        lset(ip, IP.piv + i, l, piv[pt, i] if known else i)
+    lset(f, F.have, l, float(have[pt]))
+    lset(f, F.hist, l, float(hist[pt]))
+    lset(f, F.live, l, float(live[pt]) if valid else 0.0)
+    lset(f, F.tbrk, l, tbrk[pt])
+    lset(f, F.itn, l, 0.0)
+    lset(f, F.stp, l, 0.0)
+    lset(f, F.jn, l, 0.0)
+    lset(f, F.held, l, 1.0 if valid else 0.0)
+    lset(ip, IP.pt, l, pt)
 
 
-@njit(**_OPTS)
-def _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP):
-    """The lanes' state back into points pt0 … pt0 + nl − 1."""
+@njit(inline='always', **_OPTS)
+def _scatter(st_, pt, l, d, s, nz, w, S, f, F, ip, IP):
+    """Lane ``l``'s state back into point ``pt``."""
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
     hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
     itn, stp = st_.iterations, st_.steps
-    for l in range(nl):
-        pt = pt0 + l
+    for m in range(d):
+        put(q, pt, m, lget(w, S.q + m, l))
+        put(p, pt, m, lget(w, S.p + m, l))
+        put(Lam, pt, m, lget(w, S.lam + m, l))
+        put(qc, pt, m, lget(w, S.qc + m, l))
+        put(pc, pt, m, lget(w, S.pc + m, l))
+        put(mu, pt, m, lget(w, S.mu + m, l))
+    for i in range(s):
         for m in range(d):
-            put(q, pt, m, lget(w, S.q + m, l))
-            put(p, pt, m, lget(w, S.p + m, l))
-            put(Lam, pt, m, lget(w, S.lam + m, l))
-            put(qc, pt, m, lget(w, S.qc + m, l))
-            put(pc, pt, m, lget(w, S.pc + m, l))
-            put(mu, pt, m, lget(w, S.mu + m, l))
-        for i in range(s):
-            for m in range(d):
-                put3(Y, pt, i, m, lget(w, S.Y + i * d + m, l))
-        for i in range(nz):
-            for j in range(nz):
-                put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, l))
-            piv[pt, i] = lget(ip, IP.piv + i, l)
-        have[pt] = 1 if lget(f, F.have, l) != 0.0 else 0
-        hist[pt] = 1 if lget(f, F.hist, l) != 0.0 else 0
-        live[pt] = 1 if lget(f, F.live, l) != 0.0 else 0
-        tbrk[pt] = lget(f, F.tbrk, l)
-        itn[pt] += int(lget(f, F.itn, l))
-        stp[pt] += int(lget(f, F.stp, l))
+            put3(Y, pt, i, m, lget(w, S.Y + i * d + m, l))
+    for i in range(nz):
+        for j in range(nz):
+            put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, l))
+        piv[pt, i] = lget(ip, IP.piv + i, l)
+    have[pt] = 1 if lget(f, F.have, l) != 0.0 else 0
+    hist[pt] = 1 if lget(f, F.hist, l) != 0.0 else 0
+    live[pt] = 1 if lget(f, F.live, l) != 0.0 else 0
+    tbrk[pt] = lget(f, F.tbrk, l)
+    itn[pt] += int(lget(f, F.itn, l))
+    stp[pt] += int(lget(f, F.stp, l))
+
+
+@njit(inline='always', **_OPTS)
+def _next_live(live, order, nxt, hi):
+    """The first position at or after ``nxt`` in ``order`` whose point is live (``hi`` when none)."""
+    while nxt < hi and live[order[nxt]] == 0:
+        nxt += 1
+    return nxt
 
 
 @njit(**_OPTS)
-def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto, lay):
-    """Points lo … hi − 1 of the state through ``nsteps`` steps, W (= len(proto)) at a time, with
-    the thread's scratch arrays.
+def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto,
+           lay):
+    """The live points among order[lo … hi − 1] through ``nsteps`` steps each, W (= len(proto))
+    lanes at a time, with the thread's scratch arrays; returns the group steps taken and the Newton
+    iterations they ran.
+
+    **Lanes are refilled.**  Each lane holds one point and counts its steps (``F.jn``); after every
+    step, a lane whose point has taken its ``nsteps`` steps or has broken down hands the point back
+    (:func:`_scatter`) and takes up the next live point of the block (:func:`_gather`), which starts
+    at its own first step: the lanes of one group may be at different steps, each step aiming at
+    its own lane's time.  Points that are not live are never taken up (:func:`advance` leaves them
+    out of the blocks), so dead points cost nothing and live ones are packed into full groups.  A
+    lane with nothing left to take is empty (not live) until the last lane's point is done.  Nothing
+    in a point's arithmetic reads another lane, so its bits are those it gets alone (W = 1 takes the
+    points one after another).
 
     The scratch arrays are arguments (not locals) on purpose: the caller holds them for the whole
     call, while numba would free a local array after its last use as an array, i.e. while the raw
@@ -1004,30 +1028,56 @@ def _block(WS, FS, IS, QR, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nstep
     W = len(proto)
     w, f, ip, qr = lanes(WS, 0, proto), lanes(FS, 0, plain(proto)), lanes(IS, 0, plain(proto)), _at(QR, 0)
     live = st_.live
-    for pt0 in range(lo, hi, W):
-        nl = min(W, hi - pt0)
-        alive = False
-        for pt in range(pt0, pt0 + nl):
-            alive = alive or live[pt] != 0
-        if not alive:
-            continue
-        _gather(st_, pt0, nl, W, d, s, nz, w, S, f, F, ip, IP)
-        for j in range(nsteps):
-            if not _step(t0 + (first + j) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
-                break
-        _scatter(st_, pt0, nl, d, s, nz, w, S, f, F, ip, IP)
+    nxt = _next_live(live, order, lo, hi)
+    if nxt == hi or nsteps <= 0:
+        return 0, 0
+    pad = order[nxt]                              # empty lanes hold this point's values, not live
+    held = 0
+    for l in range(W):
+        if nxt < hi:
+            _gather(st_, order[nxt], l, True, d, s, nz, w, S, f, F, ip, IP)
+            nxt = _next_live(live, order, nxt + 1, hi)
+            held += 1
+        else:
+            _gather(st_, pad, l, False, d, s, nz, w, S, f, F, ip, IP)
+    rounds = 0
+    last = float(nsteps)
+    while held > 0:
+        rounds += 1
+        _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr,
+              cfg)
+        jn = ld(f, F.jn) + 1.0
+        st(f, F.jn, jn)
+        ends = mand(ld(f, F.held) != 0.0, mor(ld(f, F.live) == 0.0, jn >= last))
+        if anyl(ends):                            # lanes whose point is done: hand it back, take the next
+            for l in range(W):
+                if lmask(ends, l):
+                    _scatter(st_, lget(ip, IP.pt, l), l, d, s, nz, w, S, f, F, ip, IP)
+                    if nxt < hi:
+                        _gather(st_, order[nxt], l, True, d, s, nz, w, S, f, F, ip, IP)
+                        nxt = _next_live(live, order, nxt + 1, hi)
+                    else:
+                        lset(f, F.held, l, 0.0)
+                        lset(f, F.live, l, 0.0)
+                        held -= 1
+    return rounds, int(lget(f, F.gits, 0))
 
 
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay):
+def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds):
     """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
-    ``first`` aiming at t0 + first·h.  Points are taken ``block`` at a time, blocks spread over the
-    threads, and W = len(proto) at a time within a block (``ev`` must be the W-lane point function);
-    a point's steps never depend on its block, its lanes, its thread or its neighbours.
+    ``first`` aiming at t0 + first·h.  The live points, in their order, are taken ``block`` at a
+    time (dead points are left out before blocks are made, so every block but the last is full),
+    blocks spread over the threads, and W = len(proto) at a time within a block (``ev`` must be the
+    W-lane point function); a point's steps never depend on its block, its lanes, its thread or its
+    neighbours.
 
     ``st_``: the :class:`StateArrays` as a plain tuple; ``tolerances``: the float64 array of a
     :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``lay``: :func:`layout` as
-    three int64 arrays (Engine._layout).
+    three int64 arrays (Engine._layout); ``rounds`` (int64, a row per block): the steps and the
+    Newton iterations each block's group of lanes ran (:func:`_block`), so point-steps / (W · Σ
+    steps) is the share of lane steps that did work, and the points' iterations / (W · Σ
+    iterations) that of lane iterations.
     """
     arrays = StateArrays(*st_)
     q, Y, lu = arrays.q, arrays.Y, arrays.lu
@@ -1040,14 +1090,21 @@ def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tol
     S, F, IP = _records(lay)
     nw, nf, ni = S.size * W, F.size * W, IP.size * W
     kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
-    nblocks = (n + block - 1) // block
+    live = arrays.live
+    order = np.empty(n, np.int64)               # the live points, in order
+    m = 0
+    for i in range(n):
+        if live[i] != 0:
+            order[m] = i
+            m += 1
+    nblocks = (m + block - 1) // block
     for bi in prange(nblocks):
         WS = np.zeros(nw * (q.ndim - 1), q.dtype)     # (a double-double state, (n, d, 2): two doubles a value)
         FS = np.zeros(nf)
         IS = np.zeros(ni, np.int64)
         QR = np.zeros(d)
-        _block(WS, FS, IS, QR, bi * block, min(n, (bi + 1) * block), ev, inside, kp, h, tb, plan, t0, first, nsteps,
-               st_, d, s, nz, cfg, proto, lay)
+        rounds[bi, 0], rounds[bi, 1] = _block(WS, FS, IS, QR, order, bi * block, min(m, (bi + 1) * block), ev, inside,
+                                              kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto, lay)
 
 
 @njit(**_OPTS)

@@ -19,6 +19,7 @@ Newton iteration as coded (scripts/engine_lanes.py, Jacobian refreshes left out:
 times the measured iterations per step, over the clock /proc/cpuinfo reports.
 """
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -99,6 +100,70 @@ def clock_hz():
         return float("nan")
 
 
+@contextlib.contextmanager
+def trees_of(base):
+    """{"base": a temporary git worktree of commit ``base``, "this": this tree} and a scratch folder;
+    the worktree is removed afterwards.  Both trees share the engine's cache of generated system
+    code (its keys do not depend on the tree) and each has its own numba cache beside its sources."""
+    tmp = Path(tempfile.mkdtemp())
+    tree = tmp / "base"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), base], check=True,
+                   capture_output=True)
+    try:
+        yield {"base": tree, "this": ROOT}, tmp
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], capture_output=True)
+
+
+def alternate(trees, rounds):
+    """(round, tree key) pairs, the trees' order alternating from round to round."""
+    for r in range(rounds):
+        for key in (list(trees) if r % 2 == 0 else list(trees)[::-1]):
+            yield r, key
+
+
+def child(tree, argv):
+    """Run ``python argv…`` with ``integrators`` imported from ``tree`` (its own working directory and
+    PYTHONPATH: the editable install would otherwise win); the JSON of its last line of output."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    env.pop("NUMBA_CACHE_DIR", None)
+    p = subprocess.run([sys.executable, *map(str, argv)], env=env, capture_output=True, text=True, check=True,
+                       cwd=str(tree))
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def bits_equal(tmp):
+    """{case: whether every array the two children dumped for it (base.npz, this.npz) is bitwise equal}."""
+    a, b = np.load(tmp / "base.npz"), np.load(tmp / "this.npz")
+    same = {k.split("/")[0]: True for k in a}
+    for k in a:
+        same[k.split("/")[0]] &= bool(np.array_equal(a[k], b[k], equal_nan=True))
+    return same
+
+
+def run_rounds(script, base, rounds):
+    """``rounds`` rounds of ``script --measure`` in each tree (alternating): ({tree: [JSON, …]},
+    {case: bits equal})."""
+    runs = {}
+    with trees_of(base) as (trees, tmp):
+        for r, key in alternate(trees, rounds):
+            argv = [script, "--base", base, "--measure", tmp / f"{key}.npz"]
+            runs.setdefault(key, []).append(child(trees[key], argv))
+            print(f"round {r + 1}: {key} done", flush=True)
+        return runs, bits_equal(tmp)
+
+
+def write(path, script, args, rows, **extra):
+    """The rows, the machine, both commits and the command as JSON at ``path``."""
+    out = dict(machine=platform.processor() or platform.machine(), **extra, base=args.base,
+               this=subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                   text=True).stdout.strip(), rounds=args.rounds, date=time.strftime("%Y-%m-%d"),
+               command=f"python scripts/{script} --base {args.base} --rounds {args.rounds}", rows=rows)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps(out, indent=1))
+    print(f"wrote {path}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", required=True, help="the earlier commit")
@@ -108,28 +173,7 @@ def main():
     args = ap.parse_args()
     if args.measure:
         return measure(args.measure)
-    tmp = Path(tempfile.mkdtemp())
-    base = tmp / "base"
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), args.base], check=True,
-                   capture_output=True)
-    trees = {"base": base, "this": ROOT}
-    runs = {k: [] for k in trees}
-    try:
-        for r in range(args.rounds):
-            order = list(trees) if r % 2 == 0 else list(trees)[::-1]
-            for key in order:
-                env = dict(os.environ, PYTHONPATH=str(trees[key]))
-                env.pop("NUMBA_CACHE_DIR", None)
-                p = subprocess.run([sys.executable, __file__, "--base", args.base, "--measure", str(tmp / f"{key}.npz")],
-                                   env=env, capture_output=True, text=True, check=True, cwd=str(trees[key]))
-                runs[key].append(json.loads(p.stdout.strip().splitlines()[-1]))
-                print(f"round {r + 1}: {key} done", flush=True)
-        a, b = np.load(tmp / "base.npz"), np.load(tmp / "this.npz")
-        same = {k.split("/")[0]: True for k in a}
-        for k in a:
-            same[k.split("/")[0]] &= bool(np.array_equal(a[k], b[k], equal_nan=True))
-    finally:
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], capture_output=True)
+    runs, same = run_rounds(__file__, args.base, args.rounds)
     hz = clock_hz()
     rows = []
     for key in runs["this"][0]:
@@ -145,13 +189,7 @@ def main():
                          rounds_after=[r[key]["rate"] for r in runs["this"]]))
         print(f"{key:28s} {before:12,.0f} -> {after:12,.0f}  x{after / before:5.2f}  it {its:.2f}  "
               f"flop/cycle {fl * before / hz:.2f} -> {fl * after / hz:.2f}  bits {'equal' if same[key] else 'DIFFER'}")
-    out = dict(machine=platform.processor() or platform.machine(), clock_hz=hz, base=args.base,
-               this=subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                   text=True).stdout.strip(), rounds=args.rounds, date=time.strftime("%Y-%m-%d"),
-               command=f"python scripts/side_by_side.py --base {args.base} --rounds {args.rounds}", rows=rows)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=1))
-    print(f"wrote {args.out}")
+    write(args.out, "side_by_side.py", args, rows, clock_hz=hz)
 
 
 if __name__ == "__main__":

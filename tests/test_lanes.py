@@ -78,6 +78,73 @@ def test_the_lane_kernel_agrees_with_the_scalar_kernel_across_calls_and_resumes(
     assert not _same(*states)
 
 
+def _rounds_with_refill(busy, W, block):
+    """The group steps of lanes that take up the next point as soon as theirs is done: the live
+    points in order, in blocks of ``block``, point i holding its lane for busy[i] steps (0: dead,
+    never taken up)."""
+    total, live = 0, [b for b in busy if b > 0]
+    for lo in range(0, len(live), block):
+        queue = live[lo:lo + block]
+        lanes, rounds = queue[:W], 0
+        queue = queue[W:]
+        while lanes:
+            rounds += 1
+            lanes = [b - 1 for b in lanes]
+            for j, b in enumerate(lanes):
+                if b == 0 and queue:
+                    lanes[j] = queue.pop(0)
+            lanes = [b for b in lanes if b > 0]
+        total += rounds
+    return total
+
+
+def test_lanes_are_refilled_and_each_point_keeps_its_bits(rng):
+    """A lane whose point breaks down or has taken its steps takes up the next live point of the
+    block (integrators/kernel.py, _block): over two calls, with points dead from the start and
+    points breaking down in between, every point's bits equal W = 1's, and the group steps the
+    kernel reports are exactly those of in-order refilling (a point holds its lane for its steps,
+    one more if it broke down) — fewer than groups of fixed lanes would take.  The Newton iterations
+    it reports are the point's own at W = 1."""
+    sy = integrators.system("lotka_volterra_2d")
+    n = 40
+    q0 = np.abs(np.array(sy.defaults["q0"]) * (1 + 0.6 * rng.standard_normal((n, sy.d)))) + 0.05
+    eng = integrators.Engine(sy, integrators.tableau("GLRK2"), "symmetric", 0.9)
+    states = {}
+    for W, block in ((1, 64), (kernel.LANES, 64), (kernel.LANES, 16), (kernel.LANES, 5)):
+        st = eng.state(q0)
+        st.live[::3] = False                                  # dead before the first call
+        uses = []
+        for first, steps in ((1, 6), (7, 6)):
+            before_steps, before_live, before_its = st.steps.copy(), st.live.copy(), st.iterations.sum()
+            use = eng.advance(st, first, steps, block=block, lanes=W)
+            busy = np.where(before_live, st.steps - before_steps + (before_live & ~st.live), 0)
+            assert use.W == W
+            assert use.rounds == _rounds_with_refill(list(busy), W, block), (W, block, first)
+            its = st.iterations.sum() - before_its                # one lane: the group's iterations are its own
+            assert use.iterations == its if W == 1 else its <= W * use.iterations < W * its
+            uses.append((use.rounds, busy))
+        states[W, block] = st, uses
+    alone = states[1, 64][0]
+    assert 0 < alone.live.sum() < n - len(range(0, n, 3))     # breakdowns beside survivors
+    for key, (st, _) in states.items():
+        assert not _same(alone, st), key
+    rounds, busy = states[kernel.LANES, 64][1][0]
+    fixed = sum(max(busy[i:i + kernel.LANES]) for i in range(0, n, kernel.LANES))
+    assert rounds < fixed                                      # dead lanes were refilled
+
+
+def test_dead_points_are_skipped_and_live_ones_packed():
+    """Eight live points among sixteen fill one group: 5 steps take 5 group steps, not 10."""
+    sy = integrators.system("point_vortices")
+    eng = integrators.Engine(sy, integrators.tableau("GLRK1"), "none", 0.1)
+    q0 = np.array(sy.defaults["q0"]) * (1 + 1e-3 * np.arange(16))[:, None]
+    st = eng.state(q0)
+    st.live[1::2] = False
+    use = eng.advance(st, 1, 5, lanes=kernel.LANES)
+    assert use.rounds == 5 and st.steps.tolist() == [5, 0] * 8
+    assert eng.advance(st, 6, 0, lanes=kernel.LANES).rounds == 0 and st.steps.sum() == 40
+
+
 def test_lanes_must_be_one_or_the_kernels_width():
     sy = integrators.system("point_vortices")
     eng = integrators.Engine(sy, integrators.tableau("GLRK1"), "none", 0.1)
