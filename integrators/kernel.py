@@ -138,9 +138,9 @@ Scratch = namedtuple("Scratch", [
     "pth", "pT", "pTT", "pdH", "pHH",
     # d-vectors
     "qbar", "pbar", "q0", "pb", "sY", "sG", "q1", "p1", "mid", "tl", "qh", "ph", "vf", "inc", "qn", "qcn", "pn",
-    "pcn", "ln", "sYs", "qr",
+    "pcn", "ln", "sYs", "mug", "qr",
     # Newton: unknowns, evaluated iterate, residual, fresh Jacobian, projection's Newton, guesses
-    "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess", "zero",
+    "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess",
     # the points' own state while the group is advanced
     "q", "p", "lam", "qc", "pc", "Y", "mu", "lu",
     "size"])
@@ -152,6 +152,7 @@ Flags = namedtuple("Flags", [
     "have", "hist", "live", "active", "okstep", "tbrk", "itn", "stp",   # the points' step flags
     "jn",                         # the steps a lane's point has taken in this call
     "held",                       # whether the lane holds a point (IntScratch.pt)
+    "retry",                      # the lane's step failed once: its next _step is the second try
     "gits",                       # (lane 0) the Newton iterations the group has run
     "size"])
 Flags.__doc__ = "Offsets of the per-lane real (never complex) bookkeeping."
@@ -181,7 +182,7 @@ def layout(s, d, nz):
         Q=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
         pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
         **dict.fromkeys(D_VECTORS, d),
-        z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd, zero=d,
+        z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd,
         q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz))
     F = _offsets(Flags, dict(scale=nz, pscale=d, **dict.fromkeys(Flags._fields[2:-1], 1)))
     IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d, pt=1))
@@ -889,12 +890,17 @@ def _commit(inside, k, plan, d, s, iM, w, S, f, F, qr):
 
 @njit(**_OPTS)
 def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
-    """Advance the live lanes by one step.  A step that fails from the extrapolated guess (and the
-    last step's Jacobian) is tried once more from h·q̇(q_n) with a fresh Jacobian; a lane that still
-    fails (Newton does not converge, a value is not finite, q leaves the domain) is frozen at its
-    last good state with its breakdown time set to ``t_next``."""
+    """Advance the live lanes by one step; returns the lanes whose step is over (taken, or broken down).
+
+    A step that fails from the extrapolated guess (and the last step's Jacobian) is tried once more
+    from h·q̇(q_n) with a fresh Jacobian; a lane that still fails (Newton does not converge, a value
+    is not finite, q leaves the domain) is frozen at its last good state with its breakdown time set
+    to ``t_next``.  The second try is the lane's next call of this function (``F.retry`` set, its
+    step not over), made beside its neighbours' next steps instead of in a pass of its own in which
+    they would wait; it computes what a pass of its own would."""
     live = ld(f, F.live) != 0.0
     fresh = ld(f, F.hist) == 0.0
+    again = mand(live, ld(f, F.retry) != 0.0)
     c = _coefficients(tb, s)
     Ys, guess, v = at(w, S.Y), at(w, S.guess), at(w, S.vf)
     velocity = cfg.velocity != 0.0              # the predictor: with h·q̇(q_n) as a node at 0
@@ -908,27 +914,26 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
             if velocity:
                 acc = acc + c.E[i * (s + 1) + s] * ld(v, m)
             st(guess, i * d + m, acc)
-    first = mand(live, fresh)
+    first = mand(live, mor(fresh, again))       # a first step, or a second try: from h·q̇(q_n)
     if anyl(first):
         _first_guess(ev, k, at(w, S.q), h, guess, first, d, s, w, S, ip, IP)
+    mu, mug = at(w, S.mu), at(w, S.mug)
+    for m in range(d):                          # μ's guess: the last step's, zero on a second try
+        st(mug, m, sel(again, 0.0, ld(mu, m)))
     st(f, F.active, sel(live, 1.0, 0.0))
-    _attempt(ld(f, F.have) != 0.0, guess, at(w, S.mu), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr,
-             cfg)
+    _attempt(mand(ld(f, F.have) != 0.0, mnot(again)), guess, mug, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip,
+             IP, qr, cfg)
     ok = ld(f, F.okstep) != 0.0
-    retry = mand(live, mand(mnot(ok), mnot(fresh)))
-    if anyl(retry):
-        _first_guess(ev, k, at(w, S.q), h, guess, retry, d, s, w, S, ip, IP)
-        st(f, F.active, sel(retry, 1.0, 0.0))
-        _attempt(_none(f, F), guess, at(w, S.zero), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
-        ok = sel(retry, ld(f, F.okstep), sel(ok, 1.0, 0.0)) != 0.0
+    retry = mand(live, mand(mnot(ok), mnot(mor(fresh, again))))
+    st(f, F.retry, sel(live, sel(retry, 1.0, 0.0), ld(f, F.retry)))
     st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
     good = mand(live, ok)
     st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
     st(f, F.hist, sel(good, 1.0, ld(f, F.hist)))
-    broke = mand(live, mnot(ok))
+    broke = mand(live, mand(mnot(ok), mnot(retry)))
     st(f, F.tbrk, sel(broke, t_next, ld(f, F.tbrk)))
     st(f, F.live, sel(broke, 0.0, ld(f, F.live)))
-    return anyl(good)
+    return mand(live, mnot(retry))
 
 
 @njit(inline='always', **_OPTS)
@@ -962,6 +967,7 @@ def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
     lset(f, F.stp, l, 0.0)
     lset(f, F.jn, l, 0.0)
     lset(f, F.held, l, 1.0 if valid else 0.0)
+    lset(f, F.retry, l, 0.0)
     lset(ip, IP.pt, l, pt)
 
 
@@ -1044,9 +1050,9 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first
     last = float(nsteps)
     while held > 0:
         rounds += 1
-        _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr,
-              cfg)
-        jn = ld(f, F.jn) + 1.0
+        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP,
+                     qr, cfg)
+        jn = ld(f, F.jn) + sel(over, 1.0, 0.0)
         st(f, F.jn, jn)
         ends = mand(ld(f, F.held) != 0.0, mor(ld(f, F.live) == 0.0, jn >= last))
         if anyl(ends):                            # lanes whose point is done: hand it back, take the next

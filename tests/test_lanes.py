@@ -102,35 +102,40 @@ def test_lanes_are_refilled_and_each_point_keeps_its_bits(rng):
     """A lane whose point breaks down or has taken its steps takes up the next live point of the
     block (integrators/kernel.py, _block): over two calls, with points dead from the start and
     points breaking down in between, every point's bits equal W = 1's, and the group steps the
-    kernel reports are exactly those of in-order refilling (a point holds its lane for its steps,
-    one more if it broke down) — fewer than groups of fixed lanes would take.  The Newton iterations
-    it reports are the point's own at W = 1."""
+    kernel reports are exactly those of in-order refilling, each point holding its lane for the
+    group steps it takes alone (its steps, one more for each second try and for a breakdown) —
+    fewer than groups of fixed lanes would take.  The Newton iterations it reports are the points'
+    own at W = 1."""
     sy = integrators.system("lotka_volterra_2d")
-    n = 40
+    n, calls = 40, ((1, 6), (7, 6))
     q0 = np.abs(np.array(sy.defaults["q0"]) * (1 + 0.6 * rng.standard_normal((n, sy.d)))) + 0.05
     eng = integrators.Engine(sy, integrators.tableau("GLRK2"), "symmetric", 0.9)
+    busy = np.zeros((len(calls), n), dtype=int)              # each point's group steps when alone
+    for i in range(n):
+        st = eng.state(q0[i:i + 1])
+        st.live[:] = i % 3 != 0
+        for c, (first, steps) in enumerate(calls):
+            busy[c, i] = eng.advance(st, first, steps, lanes=1).rounds
     states = {}
     for W, block in ((1, 64), (kernel.LANES, 64), (kernel.LANES, 16), (kernel.LANES, 5)):
         st = eng.state(q0)
         st.live[::3] = False                                  # dead before the first call
-        uses = []
-        for first, steps in ((1, 6), (7, 6)):
-            before_steps, before_live, before_its = st.steps.copy(), st.live.copy(), st.iterations.sum()
+        for c, (first, steps) in enumerate(calls):
+            before_its = st.iterations.sum()
             use = eng.advance(st, first, steps, block=block, lanes=W)
-            busy = np.where(before_live, st.steps - before_steps + (before_live & ~st.live), 0)
             assert use.W == W
-            assert use.rounds == _rounds_with_refill(list(busy), W, block), (W, block, first)
+            assert use.rounds == _rounds_with_refill(list(busy[c]), W, block), (W, block, first)
             its = st.iterations.sum() - before_its                # one lane: the group's iterations are its own
             assert use.iterations == its if W == 1 else its <= W * use.iterations < W * its
-            uses.append((use.rounds, busy))
-        states[W, block] = st, uses
-    alone = states[1, 64][0]
+            if (W, block, c) == (kernel.LANES, 64, 0):
+                fixed = sum(max(busy[0, i:i + W]) for i in range(0, n, W))
+                assert use.rounds < fixed                          # dead lanes were refilled
+        states[W, block] = st
+    alone = states[1, 64]
     assert 0 < alone.live.sum() < n - len(range(0, n, 3))     # breakdowns beside survivors
-    for key, (st, _) in states.items():
+    assert (busy.sum(axis=0) > alone.steps + ~alone.live).any()   # and second tries
+    for key, st in states.items():
         assert not _same(alone, st), key
-    rounds, busy = states[kernel.LANES, 64][1][0]
-    fixed = sum(max(busy[i:i + kernel.LANES]) for i in range(0, n, kernel.LANES))
-    assert rounds < fixed                                      # dead lanes were refilled
 
 
 def test_dead_points_are_skipped_and_live_ones_packed():
