@@ -936,7 +936,7 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
     return mand(live, mnot(retry))
 
 
-@njit(inline='always', **_OPTS)
+@njit(**_OPTS)
 def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
     """The state of point ``pt`` into lane ``l``; ``valid`` False leaves the lane empty (it holds
     the point's values, so that its arithmetic stays on ordinary numbers, but it is not live and
@@ -971,7 +971,7 @@ def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
     lset(ip, IP.pt, l, pt)
 
 
-@njit(inline='always', **_OPTS)
+@njit(**_OPTS)
 def _scatter(st_, pt, l, d, s, nz, w, S, f, F, ip, IP):
     """Lane ``l``'s state back into point ``pt``."""
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
