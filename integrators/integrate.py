@@ -133,6 +133,8 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     q0, lead, p0, lam0 = _checked_points(system, q0, p0, lam0)
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be 'double' or 'double-double', got {precision!r}")
+    if chunk is not None and (not float(chunk).is_integer() or int(chunk) < 1):
+        raise ValueError(f"chunk must be a positive whole number of points, got {chunk!r}")
     engine = Engine(system, tab, projection, h, precision=precision)
     state = engine.state(q0, p0, lam0)         # (double-double: the doubles taken exactly, ϑ(q0) in double-double)
     n = q0.shape[0]
@@ -151,7 +153,7 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     record(0)
     march(engine, state, 0, steps, save_every, on_output=record, t0=t0,
           progress=None if progress is None else (lambda step: progress(step, steps)),
-          block=int(chunk) if chunk else BLOCK)
+          block=int(chunk) if chunk is not None else BLOCK)
     full = (nsave,) + lead + (system.d,)
     lo = {}
     if dd:

@@ -52,6 +52,8 @@ def test_lobatto_IIIA2_breaks_down_and_others_are_unaffected():
     (dict(steps=-3), "non-negative"),
     (dict(projection="orthogonal"), "unknown projection"),
     (dict(tableau="RadIIA2", projection="symmetric"), "R\\(∞\\)"),
+    (dict(chunk=-5), "chunk must be a positive"),
+    (dict(chunk=0), "chunk must be a positive"),
 ])
 def test_bad_input_is_a_clear_error(kw, msg):
     lv = integrators.system("lotka_volterra_2d")
