@@ -18,7 +18,6 @@ move: the group steps and group Newton iterations the kernel reports
 blocks of 64 and with fixed groups (blocks of W = 8: nothing to refill from within a call), and
 the occupancies point-steps / (W · group steps) and point iterations / (W · group iterations).
 """
-import argparse
 import json
 import sys
 import time
@@ -28,7 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
-from side_by_side import run_rounds, write  # noqa: E402
+from side_by_side import arguments, run_rounds, write  # noqa: E402
 
 CASES = [(sigma, factor) for sigma in (0.1, 0.3) for factor in (1, 4, 16)]
 BLOCK = 64          # integrators.engine.BLOCK
@@ -73,12 +72,7 @@ def measure(dump):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", required=True, help="the earlier commit (fixed groups of lanes)")
-    ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--out", default=str(ROOT / "docs/figures/lane_refill.json"))
-    ap.add_argument("--measure", help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    args = arguments(__doc__, "lane_refill.json", "the earlier commit (fixed groups of lanes)")
     if args.measure:
         return measure(args.measure)
     runs, same = run_rounds(__file__, args.base, args.rounds)

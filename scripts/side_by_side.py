@@ -164,13 +164,19 @@ def write(path, script, args, rows, **extra):
     print(f"wrote {path}")
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", required=True, help="the earlier commit")
+def arguments(doc, out, base_help="the earlier commit"):
+    """The command line both side-by-side scripts take: --base, --rounds, --out (default ``out``
+    under docs/figures) and the children's hidden --measure."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--base", required=True, help=base_help)
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--out", default=str(ROOT / "docs/figures/side_by_side.json"))
+    ap.add_argument("--out", default=str(ROOT / "docs/figures" / out))
     ap.add_argument("--measure", help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def main():
+    args = arguments(__doc__, "side_by_side.json")
     if args.measure:
         return measure(args.measure)
     runs, same = run_rounds(__file__, args.base, args.rounds)
