@@ -12,6 +12,10 @@ The batch-run service (scenes, the MPI driver, HDF5 output, plots, the CLI) is t
 :mod:`integrators.service` and the symplecticity audit is :mod:`integrators.audit`; no module of
 the core imports either.
 """
+from . import numba_cache
+
+numba_cache.install()       # before anything is compiled or loaded: processes share the cache safely
+
 from .integrate import Solution, integrate
 from .engine import Engine, State, Tolerances, march, set_threads
 from .projections import PROJECTIONS
