@@ -16,7 +16,9 @@ per cache folder, ``poincare-numba.lock``: a save holds it exclusively from read
 writing the data, a load shares it from reading the index to reading the data.  A save takes a few
 milliseconds, so a compilation waits for nothing measurable.  Where the lock file cannot be created
 (a cache folder this user may only read) or ``fcntl`` does not exist (Windows), numba's own
-behaviour is kept.  The package installs it on import (``integrators/__init__.py``).
+behaviour is kept.  A save that cannot be written (a full disk, a file-size limit) is dropped
+instead of failing the compilation it follows: the code is compiled and runs, and the next
+process compiles it again.  The package installs both on import (``integrators/__init__.py``).
 """
 from __future__ import annotations
 
@@ -60,9 +62,12 @@ def install() -> bool:
     save, load = cls.save, cls.load
 
     def locked_save(self, key, data):
-        os.makedirs(self._cache_path, exist_ok=True)
-        with _locked(self._cache_path, exclusive=True):
-            return save(self, key, data)
+        try:
+            os.makedirs(self._cache_path, exist_ok=True)
+            with _locked(self._cache_path, exclusive=True):
+                return save(self, key, data)
+        except OSError:             # a full disk, a file-size limit: the code compiled is in memory and
+            return None             # runs; only the next process compiles it again (numba would raise)
 
     def locked_load(self, key):
         with _locked(self._cache_path, exclusive=False):

@@ -77,3 +77,26 @@ def test_two_processes_saving_two_signatures_at_once_keep_each_signatures_code(t
     assert _race(tmp_path / "plain", locked=False)[0] == "2"
     # with it, both signatures load from the cache and give their own results
     assert _race(tmp_path / "locked", locked=True) == ["2.5", "2", "2"]
+
+
+FULL = """
+import resource, sys
+if sys.argv[1] == "locked":
+    import integrators                                   # installs the wrapper on import
+resource.setrlimit(resource.RLIMIT_FSIZE, (200, 200))   # no room for numba's index or data file
+import kernelmod
+print(kernelmod.add_one(1.5))
+"""
+
+
+@pytest.mark.parametrize("mode", ["plain", "locked"])
+def test_a_cache_that_cannot_be_written_does_not_fail_the_compilation(tmp_path, mode):
+    (tmp_path / "kernelmod.py").write_text(textwrap.dedent(MODULE))
+    (tmp_path / "full.py").write_text(textwrap.dedent(FULL))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    r = subprocess.run([sys.executable, "full.py", mode], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=120)
+    if mode == "plain":                                  # numba alone: the failed save fails the call
+        assert r.returncode != 0 and "File too large" in r.stderr
+    else:
+        assert r.returncode == 0 and r.stdout.split() == ["2.5"], r.stderr
