@@ -14,12 +14,10 @@ advances points through :class:`Engine` and :func:`march`:
   (:func:`integrators.codegen.point_functions`: the generated source, its cache and its printer
   live there); parameter values are runtime data, so ``with_params`` compiles nothing.
 
-Threads: :func:`set_threads` (numba's thread count; :meth:`Engine.advance` gives each thread an
-equal run of blocks, the kernel releasing the GIL; results are bitwise the same for any count).
+Threads: :func:`set_threads` (numba's pool; results are bitwise the same for any count).
 """
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import math
 import os
@@ -73,38 +71,6 @@ def kernel_cached() -> bool:
 def get_threads() -> int:
     import numba
     return numba.get_num_threads()
-
-
-_POOL: list = []                # the worker threads of _over_blocks, made when first needed
-
-
-def _over_blocks(kernel_advance, args, order, nblocks):
-    """kernel.advance(*args, order, b0, b1) over blocks 0 … nblocks − 1, split into get_threads()
-    equal runs, the first in this thread and the others in worker threads (the kernel releases the
-    GIL), as numba's parallel loop split them.  Returns when every run has, like that loop: an
-    exception or a signal's exception raised meanwhile is raised then, never while a thread still
-    writes into the state."""
-    T = max(1, min(get_threads(), nblocks))
-    bounds = [nblocks * t // T for t in range(T + 1)]
-    if T > 1 and (not _POOL or _POOL[0]._max_workers < T - 1):
-        _POOL[:] = [concurrent.futures.ThreadPoolExecutor(max_workers=T - 1, thread_name_prefix="poincare-blocks")]
-    runs = [_POOL[0].submit(kernel_advance, *args, order, bounds[t], bounds[t + 1]) for t in range(1, T)]
-    first = None
-    try:
-        kernel_advance(*args, order, bounds[0], bounds[1])
-    except BaseException as exc:
-        first = exc
-    for run in runs:
-        while True:
-            try:
-                run.result()
-                break
-            except BaseException as exc:        # the run's own exception, or a signal's while waiting
-                first = first or exc
-                if run.done():
-                    break
-    if first is not None:
-        raise first
 
 
 # -- the state and the engine --------------------------------------------------------------------
@@ -352,9 +318,11 @@ class Engine:
                     W = 1
                 self._functions[key] = ev, inside, W
             ev, inside, W = self._functions[key]
-            args = (ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
-                    int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd, (0.0,) * W)
-            return self._run(kernel.advance, args, state, block, W)
+            rounds = self._rounds(state, block)
+            kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
+                           int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
+                           (0.0,) * W, self._layout(), rounds)
+            return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
         cplx = bool(np.iscomplexobj(state.q))
         if cplx:
             W = 1
@@ -366,19 +334,17 @@ class Engine:
                 W = 1
             self._functions[key] = ev, inside, W
         ev, inside, W = self._functions[key]
-        args = (ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
-                int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W)
-        return self._run(kernel.advance, args, state, block, W)
+        rounds = self._rounds(state, block)
+        kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
+                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W, self._layout(),
+                       rounds)
+        return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
 
-    def _run(self, kernel_advance, args, state, block, W):
-        """The kernel over the live points' blocks (:func:`_over_blocks`); the call's :class:`LaneUse`."""
+    @staticmethod
+    def _rounds(state, block):
         if int(block) < 1:
             raise ValueError(f"block must be a positive number of points, got {block!r}")
-        order = np.flatnonzero(state.live).astype(np.int64)     # the live points, in order
-        nblocks = -(-order.size // int(block))
-        rounds = np.zeros((nblocks, 2), dtype=np.int64)
-        _over_blocks(kernel_advance, args + (self._layout(), rounds), order, nblocks)
-        return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
+        return np.zeros((-(-state.q.shape[0] // int(block)), 2), dtype=np.int64)
 
 
 class MapEngine:

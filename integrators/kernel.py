@@ -33,7 +33,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, types
+from numba import njit, prange, types
 from numba.np.unsafe.ndarray import to_fixed_tuple
 from numba.extending import overload
 
@@ -176,7 +176,7 @@ def layout(s, d, nz):
     """The three scratch layouts of a group (:class:`Scratch`, :class:`Flags`, :class:`IntScratch`),
     each buffer's size given by its name: the offsets in the order of the fields, the total last.
     Made in Python (Engine._layout, probe) and handed to the kernel as three int64 arrays, which it
-    turns back into the records (:func:`_records`; the kernel is entered with plain arrays and tuples)."""
+    turns back into the records (:func:`_records`: numba's parallel loop takes no named tuples)."""
     dd, sd = d * d, s * d
     S = _offsets(Scratch, dict(
         Q=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
@@ -1028,7 +1028,7 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first
     call, while numba would free a local array after its last use as an array, i.e. while the raw
     pointers taken from it are still in use.
     """
-    # the records by name (made here: the kernel is entered with plain arrays and tuples)
+    # the records by name (made here: numba's parallel loop takes no named tuples)
     S, F, IP = _records(lay)
     plan, st_, cfg = Plan(*plan), StateArrays(*st_), _newton_rule(cfg)
     W = len(proto)
@@ -1069,17 +1069,14 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first
     return rounds, int(lget(f, F.gits, 0))
 
 
-@njit(**_OPTS)
-def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds, order,
-            b0, b1):
-    """Advance the points of blocks b0 … b1 − 1 of the state tuple ``st_`` by ``nsteps`` steps, the
-    step numbered ``first`` aiming at t0 + first·h.  ``order`` lists the live points (int64, in their
-    order; dead points are left out before blocks are made, so every block but the last is full);
-    block b is order[b·block : (b + 1)·block], advanced W = len(proto) at a time (``ev`` must be the
+@njit(parallel=True, **_OPTS)
+def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds):
+    """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
+    ``first`` aiming at t0 + first·h.  The live points, in their order, are taken ``block`` at a
+    time (dead points are left out before blocks are made, so every block but the last is full),
+    blocks spread over the threads, and W = len(proto) at a time within a block (``ev`` must be the
     W-lane point function); a point's steps never depend on its block, its lanes, its thread or its
-    neighbours.  The threads are the caller's (:meth:`integrators.engine.Engine.advance` gives each
-    thread a run of blocks; this function releases the GIL): numba's parallel loop compiled the whole
-    kernel a second time and cost about 6.5 s of each first compilation (docs/benchmarks.md).
+    neighbours.
 
     ``st_``: the :class:`StateArrays` as a plain tuple; ``tolerances``: the float64 array of a
     :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``lay``: :func:`layout` as
@@ -1090,6 +1087,7 @@ def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tol
     """
     arrays = StateArrays(*st_)
     q, Y, lu = arrays.q, arrays.Y, arrays.lu
+    n = q.shape[0]
     d = len(dim)           # ``dim`` is a tuple of d zeros: d is a compile-time constant, one compilation
     #                        per dimension, and the compiler unrolls the loops over coordinates
     s = Y.shape[1]
@@ -1098,8 +1096,15 @@ def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tol
     S, F, IP = _records(lay)
     nw, nf, ni = S.size * W, F.size * W, IP.size * W
     kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
-    m = order.size
-    for bi in range(b0, b1):
+    live = arrays.live
+    order = np.empty(n, np.int64)               # the live points, in order
+    m = 0
+    for i in range(n):
+        if live[i] != 0:
+            order[m] = i
+            m += 1
+    nblocks = (m + block - 1) // block
+    for bi in prange(nblocks):
         WS = np.zeros(nw * (q.ndim - 1), q.dtype)     # (a double-double state, (n, d, 2): two doubles a value)
         FS = np.zeros(nf)
         IS = np.zeros(ni, np.int64)

@@ -104,36 +104,6 @@ def test_bits_do_not_depend_on_threads_or_blocks(rng):
         assert np.array_equal(r, runs[0])
 
 
-def test_blocks_are_split_into_equal_runs_and_a_failure_waits_for_every_thread(monkeypatch):
-    """engine._over_blocks: T threads take equal runs of consecutive blocks (numba's parallel loop's
-    split, with any T the machine allows), and an exception in one run is raised only once every
-    other run has finished writing."""
-    import threading
-    import time
-
-    from integrators import engine
-    monkeypatch.setattr(engine, "get_threads", lambda: 3)
-    runs, finished, lock = [], [], threading.Lock()
-
-    def kernel(tag, order, b0, b1):
-        with lock:
-            runs.append((b0, b1, threading.current_thread() is threading.main_thread()))
-        if b0 == 0 and tag == "fail":
-            raise ValueError("the first run failed")
-        time.sleep(0.2)
-        with lock:
-            finished.append(b0)
-
-    engine._over_blocks(kernel, ("ok",), None, 7)
-    assert sorted(runs) == [(0, 2, True), (2, 4, False), (4, 7, False)]
-    engine._over_blocks(kernel, ("ok",), None, 2)          # fewer blocks than threads: a block a thread
-    assert sorted(runs[3:]) == [(0, 1, True), (1, 2, False)]
-    finished.clear()
-    with pytest.raises(ValueError, match="first run failed"):
-        engine._over_blocks(kernel, ("fail",), None, 7)
-    assert sorted(finished) == [2, 4]                      # both other runs were done before it was raised
-
-
 def test_one_compilation_serves_every_pair_and_every_parameter_value():
     """The tableau, the projection and the parameter values are runtime data: the kernel has one
     specialisation per (dtype, dimension), and a system with other parameter values shares the
