@@ -17,8 +17,9 @@ def add_one(x):
 
 # One compiling process.  The pauses stretch numba's save (read the index, write the index, write
 # the data file) so that the two processes' steps interleave in a fixed order: both read the empty
-# index; A writes index {int64: 1} at 0.5 s, B writes {float64: 1} at 1.0 s and its data file 1 at
-# once; A writes its data file 1 at 2.0 s.  Unlocked, B's index entry ends up naming A's code.
+# index; A writes index {int64: 1} at 1 s, B writes {float64: 1} at 2 s and its data file 1 at
+# once; A writes its data file 1 at 4 s.  Unlocked, B's index entry ends up naming A's code (the
+# order holds while the two compilations end within a second of each other).
 CHILD = """
 import os, sys, time
 role, locked = sys.argv[1], sys.argv[2] == "locked"
@@ -28,7 +29,7 @@ if locked:
 from numba.core import caching
 cls = caching.IndexDataCacheFile
 save_index, save_data = cls._save_index, cls._save_data
-pause = {"A": (0.5, 1.5), "B": (1.0, 0.0)}[role]
+pause = {"A": (1.0, 3.0), "B": (2.0, 0.0)}[role]
 
 def slow_save_index(self, overloads):
     time.sleep(pause[0])
