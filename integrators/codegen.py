@@ -22,7 +22,7 @@ from pathlib import Path
 
 from sympy.printing.numpy import NumPyPrinter
 
-CODEGEN_VERSION = "4"          # bump when the generated source changes shape
+CODEGEN_VERSION = "5"          # bump when the generated source changes shape
 DD_CODEGEN_VERSION = "3"       # ... and this when the double-double source does
 
 
@@ -64,7 +64,7 @@ def _key(system) -> str:
     lane width."""
     import numba
     import sympy
-    from .kernel import LANES
+    from .kernel import LANES, WIDE
     parts = [CODEGEN_VERSION, numba.__version__, sys.version.split()[0],
              sympy.srepr(tuple(system.q)), sympy.srepr(tuple(system.params)),
              sympy.srepr(tuple(system.theta_expr)), sympy.srepr(system.H_expr), sympy.srepr(tuple(system.domain_expr))]
@@ -72,6 +72,8 @@ def _key(system) -> str:
         # the lane functions are compiled for W = LANES: another width is another module (8, the
         # width every cached module was made for, adds nothing, so those keys stay as they were)
         parts.append(f"lanes {LANES}")
+    if WIDE != 16:
+        parts.append(f"wide {WIDE}")
     if getattr(system, "fields", ()):
         # the generated module compiles integrators/splines.py's evaluation into its own functions,
         # and numba's cache checks only the module's file: a changed splines.py is a new key
@@ -188,7 +190,8 @@ def generate_source(system) -> str:
     """The Python source of a system's compiled point functions: ``evaluate_real``,
     ``evaluate_complex`` (the same body, for the audit's complex-step derivatives),
     ``evaluate_lanes`` (the same body on W = kernel.LANES interleaved points; None where a function
-    has no lane form) and ``inside``.  Made once per System object (a scene's validation and the
+    has no lane form), ``lanes_wide()`` (which compiles it on W = kernel.WIDE points when first
+    called) and ``inside``.  Made once per System object (a scene's validation and the
     engine share it)."""
     cached = getattr(system, "_generated_source", None)
     if cached is None:
@@ -221,7 +224,7 @@ def _point_body(system, printer=None):
 
 
 def _generate_source(system) -> str:
-    from .kernel import LANES
+    from .kernel import LANES, WIDE
     d = system.d
     q, params = system.q, list(system.params)
     first, second = _point_body(system)
@@ -243,6 +246,13 @@ def _generate_source(system) -> str:
             lines += ["try:", f"    {name} = cfunc({sig}, cache=True, error_model='numpy')(_{name})",
                       "except Exception:     # a function without a lane form: the engine runs W = 1",
                       f"    {name} = None"]
+    # the same body on W = kernel.WIDE lanes, compiled when a pair with a small Newton system first
+    # asks for it (lanes_wide): a system used only with larger ones never pays its compilation
+    lines += ["", "def lanes_wide():", f"    \"\"\"The W = {WIDE} point function (compiled on first call).\"\"\"",
+              f"    _P = {(0,) * WIDE!r}", "",
+              "    def _evaluate_lanes_wide(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *["    " + x for x in body], "",
+              "    return cfunc(types.void(_F, _F, types.boolean, _F, _F, _F, _F, _F), cache=True, "
+              "error_model='numpy')(_evaluate_lanes_wide)", ""]
     scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
     lines += ["", "", "@cfunc(types.void(_F, _F, _F), cache=True, error_model='numpy')",
               "def scalars(_qin, _k, _out):",
@@ -382,9 +392,11 @@ def scalar_function(system):
 
 def point_functions(system, complex_step=False, lanes=False, precision="double"):
     """The compiled (evaluate, inside) pair of ``system`` (generated and compiled once per machine):
-    the scalar real or complex-step evaluation, or with ``lanes`` the W-lane one (None where the
-    system has a function without a lane form); with ``precision="double-double"`` the scalar
-    double-double one (its own module, :func:`generate_dd_source`)."""
+    the scalar real or complex-step evaluation, or with ``lanes`` the W-lane one (``True``: W =
+    kernel.LANES; an int: that W, LANES or kernel.WIDE; None where the system has a function without
+    a lane form); with ``precision="double-double"`` the scalar double-double one (its own module,
+    :func:`generate_dd_source`), or its LANES-lane one."""
+    from .kernel import WIDE
     if precision == "double-double":
         mod = _load(system, "double-double")
         if not lanes:
@@ -396,6 +408,13 @@ def point_functions(system, complex_step=False, lanes=False, precision="double")
                 mod._lanes_dd = None
         return mod._lanes_dd, _load(system).inside
     mod = _load(system)
+    if lanes is not True and lanes == WIDE:
+        if not hasattr(mod, "_lanes_wide"):
+            try:
+                mod._lanes_wide = mod.lanes_wide()
+            except Exception:       # a function without a lane form: the engine runs W = 1
+                mod._lanes_wide = None
+        return mod._lanes_wide, mod.inside
     ev = mod.evaluate_lanes if lanes else (mod.evaluate_complex if complex_step else mod.evaluate_real)
     return ev, mod.inside
 

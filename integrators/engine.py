@@ -277,6 +277,13 @@ class Engine:
         self._cfg_dd[1] *= scale
         self._functions = {}
 
+    @property
+    def width(self):
+        """W of this pair's vector path on real states: kernel.WIDE (16) for Newton systems of at most
+        kernel.WIDE_NZ unknowns, kernel.LANES (8) above (:func:`integrators.kernel.lane_width`)."""
+        from .kernel import lane_width
+        return lane_width(self.nz)
+
     def _layout(self):
         """kernel.layout of this pair as the three int64 arrays the kernel takes."""
         if not hasattr(self, "_lay"):
@@ -302,14 +309,20 @@ class Engine:
     def advance(self, state, first, nsteps, t0=0.0, block=BLOCK, lanes=None):
         """Steps number first … first + nsteps − 1 (step k aims at t0 + k·h) for every live point.
 
-        ``lanes``: W, points advanced together in SIMD lanes (1 or kernel.LANES; None: LANES for
-        real states of at least LANES points).  Any choice gives the same bits.  Returns the
-        :class:`LaneUse` of the call (how many group steps the lanes took)."""
+        ``lanes``: W, points advanced together in SIMD lanes (1, kernel.LANES or kernel.WIDE; None:
+        :attr:`width` for real states of at least kernel.LANES points, LANES for double-double
+        ones, else 1).  Any choice gives the same bits.  Returns the :class:`LaneUse` of the call
+        (how many group steps the lanes took)."""
         from . import kernel
-        W = lanes if lanes is not None else (kernel.LANES if state.q.shape[0] >= kernel.LANES else 1)
-        if W not in (1, kernel.LANES):
-            raise ValueError(f"lanes must be 1 or {kernel.LANES}, got {lanes!r}")
-        if state.q.ndim == 3:                       # a double-double state: the kernel's third specialisation
+        dd = state.q.ndim == 3
+        if lanes is None:
+            W = 1 if state.q.shape[0] < kernel.LANES else (kernel.LANES if dd else self.width)
+        else:
+            W = lanes
+        if W not in (1, kernel.LANES, kernel.WIDE) or (dd and W == kernel.WIDE):
+            widths = f"1 or {kernel.LANES}" if dd else f"1, {kernel.LANES} or {kernel.WIDE}"
+            raise ValueError(f"lanes must be {widths}, got {lanes!r}")
+        if dd:                                      # a double-double state: the kernel's third specialisation
             key = ("dd", W)
             if key not in self._functions:
                 ev, inside = point_functions(self.system, lanes=W > 1, precision="double-double")
@@ -328,7 +341,7 @@ class Engine:
             W = 1
         key = (cplx, W)
         if key not in self._functions:
-            ev, inside = point_functions(self.system, cplx, lanes=W > 1)
+            ev, inside = point_functions(self.system, cplx, lanes=W if W > 1 else False)
             if ev is None:              # no lane form of one of the system's functions
                 ev, inside = point_functions(self.system, cplx)
                 W = 1

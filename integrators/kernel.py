@@ -60,6 +60,17 @@ REFRESH = 0.01          # a fresh Jacobian when an iteration contracted by less 
 #                         last bits: Tolerances(refresh=0.1) for now; docs/benchmarks.md.)
 
 LANES = 8               # W of the vector path: 8 doubles fill an AVX-512 register, two AVX2 ones
+WIDE = 16               # W for small Newton systems (nz <= WIDE_NZ, real states): two registers of
+WIDE_NZ = 12            # lanes, whose independent chains hide each other's latency in the LU and the
+#                         solve (GLRK1 and GLRK2 with any projection, SRK3 unprojected at d = 4);
+#                         above 12 unknowns 16 lanes' scratch outgrows the L1 cache and lose
+#                         (docs/benchmarks.md, "Sixteen lanes for small systems").
+
+
+def lane_width(nz):
+    """W of a real state's vector path for a pair with ``nz`` Newton unknowns: WIDE up to WIDE_NZ,
+    LANES above.  Any W gives a point the same bits (tests/test_lanes.py)."""
+    return WIDE if nz <= WIDE_NZ else LANES
 
 # -- the projection as the kernel reads it ------------------------------------------------------
 

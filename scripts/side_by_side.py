@@ -10,7 +10,8 @@ protocol (10⁴ points, 2 warm-up steps, then 10 steps in one call; best of 3):
 
 * ``loop``: the points near the default loop (Gaussian 1e-3), ``box``: the same number of points
   spread uniformly over the loop's bounding box; point-steps per second of GLRK2-symmetric,
-  GLRK1-none, SRK3-symmetric and GLRK4-symmetric, in lanes (W = kernel.LANES);
+  GLRK1-none, SRK3-symmetric and GLRK4-symmetric, in lanes (each tree's default width for the
+  pair: kernel.LANES, or Engine.width where the tree has it; the rows record W);
 * ``orbit``: one trajectory (W = 1, 20,000 steps, best of 3) of GLRK1-none and GLRK2/4/6-symmetric.
 
 Both trees' states after the timed steps are written to .npz files and compared field by field:
@@ -57,26 +58,27 @@ def measure(dump):
 
     def rate(tab, proj, q, steps, lanes):
         eng = integrators.Engine(gc, integrators.tableau(tab), proj, 10.0)
-        best, its = 0.0, 0.0
+        best, its, W = 0.0, 0.0, 1
         for _ in range(3):
             st = eng.state(q)
             eng.advance(st, 1, 2, lanes=lanes)
             i0 = st.iterations.sum()
             t = time.perf_counter()
-            eng.advance(st, 3, steps, lanes=lanes)
+            use = eng.advance(st, 3, steps, lanes=lanes)
             best = max(best, q.shape[0] * steps / (time.perf_counter() - t))
             its = (st.iterations.sum() - i0) / (q.shape[0] * steps)
-        return best, float(its), st
+            W = getattr(use, "W", lanes or kernel.LANES)
+        return best, float(its), st, W
 
     for tab, proj in LANE_PAIRS:
         for name, q in sets.items():
-            r, its, st = rate(tab, proj, q, 10, kernel.LANES)
-            out[f"{tab}-{proj} {name}"] = dict(rate=r, iterations=its)
+            r, its, st, W = rate(tab, proj, q, 10, None)
+            out[f"{tab}-{proj} {name}"] = dict(rate=r, iterations=its, W=W)
             for f in FIELDS:
                 states[f"{tab}-{proj} {name}/{f}"] = getattr(st, f)
     for tab, proj in ORBIT_PAIRS:
-        r, its, st = rate(tab, proj, sets["loop"][:1], 20000, 1)
-        out[f"{tab}-{proj} orbit"] = dict(rate=r, iterations=its)
+        r, its, st, W = rate(tab, proj, sets["loop"][:1], 20000, 1)
+        out[f"{tab}-{proj} orbit"] = dict(rate=r, iterations=its, W=W)
         for f in FIELDS:
             states[f"{tab}-{proj} orbit/{f}"] = getattr(st, f)
     np.savez(dump, **states)
@@ -189,11 +191,13 @@ def main():
         tab, rest = key.split("-", 1)
         proj = rest.split()[0]
         fl = flops(tab, proj) * its
-        rows.append(dict(case=key, before=before, after=after, ratio=after / before, iterations=its,
+        rows.append(dict(case=key, W_before=runs["base"][0][key].get("W"), W_after=runs["this"][0][key].get("W"),
+                         before=before, after=after, ratio=after / before, iterations=its,
                          flop_per_step=fl, flop_per_cycle_before=fl * before / hz, flop_per_cycle_after=fl * after / hz,
                          bits_equal=same[key], rounds_before=[r[key]["rate"] for r in runs["base"]],
                          rounds_after=[r[key]["rate"] for r in runs["this"]]))
-        print(f"{key:28s} {before:12,.0f} -> {after:12,.0f}  x{after / before:5.2f}  it {its:.2f}  "
+        print(f"{key:28s} W {rows[-1]['W_before']}->{rows[-1]['W_after']} {before:12,.0f} -> {after:12,.0f}  "
+              f"x{after / before:5.2f}  it {its:.2f}  "
               f"flop/cycle {fl * before / hz:.2f} -> {fl * after / hz:.2f}  bits {'equal' if same[key] else 'DIFFER'}")
     write(args.out, "side_by_side.py", args, rows, clock_hz=hz)
 

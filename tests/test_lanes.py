@@ -1,9 +1,9 @@
 """Points in SIMD lanes give every point the bits of the scalar path (integrators/kernel.py, simd.py).
 
-The kernel advances W = kernel.LANES points in lockstep with every decision per lane; these tests
-hold it to its promise: a point's bits are those it gets alone on the scalar path (W = 1), for
-every admissible pair, for lanes that break down or need other iteration counts beside it, and
-for blocks that end part-way through a group of lanes."""
+The kernel advances W = kernel.LANES (8) or kernel.WIDE (16) points in lockstep with every decision
+per lane; these tests hold it to its promise: a point's bits are those it gets alone on the scalar
+path (W = 1), for every admissible pair at both widths, for lanes that break down or need other
+iteration counts beside it, and for blocks that end part-way through a group of lanes."""
 import numpy as np
 import pytest
 
@@ -30,17 +30,36 @@ def _same(a, b):
 
 @pytest.mark.parametrize("sysname", ["point_vortices", "lotka_volterra_2d", "guiding_centre_tokamak"])
 def test_lanes_give_the_scalar_paths_bits_on_every_pair(sysname, rng):
-    """11 points (a group of 8 and one of 3 with 5 empty lanes), 3 steps, W = 8 against W = 1: every
-    field of the state bitwise equal, for all 114 admissible pairs."""
+    """19 points (W = 8: two groups and one of 3 with 5 empty lanes; W = 16: one group and one of 3
+    with 13 empty lanes), 3 steps, W = 8 and W = 16 against W = 1: every field of the state bitwise
+    equal, for all 114 admissible pairs."""
     sy = integrators.system(sysname)
-    q0 = np.array(sy.defaults["q0"]) * (1 + 0.02 * rng.standard_normal((11, sy.d)))
+    q0 = np.array(sy.defaults["q0"]) * (1 + 0.02 * rng.standard_normal((19, sy.d)))
     bad = {}
     for tab, proj in PAIRS:
         eng = integrators.Engine(sy, integrators.tableau(tab), proj, sy.defaults["h"])
-        diff = _same(_run(eng, q0, 3, 1), _run(eng, q0, 3, kernel.LANES))
-        if diff:
-            bad[(tab, proj)] = diff
+        alone = _run(eng, q0, 3, 1)
+        for W in (kernel.LANES, kernel.WIDE):
+            diff = _same(alone, _run(eng, q0, 3, W))
+            if diff:
+                bad[(tab, proj, W)] = diff
     assert not bad, bad
+
+
+def test_small_newton_systems_take_sixteen_lanes():
+    """A pair's default width follows its Newton unknowns (kernel.lane_width): 16 lanes up to 12
+    unknowns, 8 above; states of fewer than 8 points run alone, double-double ones in 8 lanes."""
+    sy = integrators.system("guiding_centre_symmetric")          # d = 4
+    q0 = invariants.loop("guiding_centre", 20)
+    for tab, proj, nz, W in (("GLRK1", "none", 4, 16), ("GLRK2", "symmetric", 12, 16),
+                             ("SRK3", "symmetric", 16, 8), ("GLRK4", "none", 16, 8)):
+        eng = integrators.Engine(sy, integrators.tableau(tab), proj, 1.0)
+        assert (eng.nz, eng.width) == (nz, W), (tab, proj)
+        assert eng.advance(eng.state(q0), 1, 1).W == W
+        assert eng.advance(eng.state(q0[:7]), 1, 1).W == 1
+    with pytest.raises(ValueError, match="lanes must be 1 or 8"):
+        eng.advance(integrators.Engine(sy, integrators.tableau("GLRK1"), "none", 1.0,
+                                       precision="double-double").state(q0), 1, 1, lanes=kernel.WIDE)
 
 
 def test_mixed_lanes_each_point_gets_the_bits_it_has_alone(rng):
@@ -54,8 +73,8 @@ def test_mixed_lanes_each_point_gets_the_bits_it_has_alone(rng):
     together = _run(eng, q0, 12, kernel.LANES)
     assert 0 < together.live.sum() < len(q0)                   # breakdowns beside survivors
     assert len(np.unique(together.iterations[together.live])) > 1
-    for block in (5, 16):
-        assert not _same(together, _run(eng, q0, 12, kernel.LANES, block=block)), block
+    for W, block in ((kernel.LANES, 5), (kernel.LANES, 16), (kernel.WIDE, 64), (kernel.WIDE, 7)):
+        assert not _same(together, _run(eng, q0, 12, W, block=block)), (W, block)
     for i in range(len(q0)):
         alone = _run(eng, q0[i:i + 1], 12, 1)
         for f in FIELDS:
@@ -64,18 +83,18 @@ def test_mixed_lanes_each_point_gets_the_bits_it_has_alone(rng):
 
 def test_the_lane_kernel_agrees_with_the_scalar_kernel_across_calls_and_resumes(rng):
     """Steps grouped into different kernel calls, with the Newton factors dropped in between (as at
-    a checkpoint), give the same bits on W = 8 as on W = 1."""
+    a checkpoint), give the same bits on W = 8 and W = 16 as on W = 1."""
     sy = integrators.system("guiding_centre_tokamak")
     q0 = np.array(sy.defaults["q0"]) * (1 + 0.02 * rng.standard_normal((13, sy.d)))
     eng = integrators.Engine(sy, integrators.tableau("SRK3"), "midpoint", sy.defaults["h"])
     states = []
-    for W in (1, kernel.LANES):
+    for W in (1, kernel.LANES, kernel.WIDE):
         st = eng.state(q0)
         eng.advance(st, 1, 2, lanes=W)
         st.forget_jacobians()
         eng.advance(st, 3, 3, lanes=W)
         states.append(st)
-    assert not _same(*states)
+    assert not _same(states[0], states[1]) and not _same(states[0], states[2])
 
 
 def _rounds_with_refill(busy, W, block):
@@ -117,7 +136,8 @@ def test_lanes_are_refilled_and_each_point_keeps_its_bits(rng):
         for c, (first, steps) in enumerate(calls):
             busy[c, i] = eng.advance(st, first, steps, lanes=1).rounds
     states = {}
-    for W, block in ((1, 64), (kernel.LANES, 64), (kernel.LANES, 16), (kernel.LANES, 5)):
+    for W, block in ((1, 64), (kernel.LANES, 64), (kernel.LANES, 16), (kernel.LANES, 5), (kernel.WIDE, 64),
+                     (kernel.WIDE, 21)):
         st = eng.state(q0)
         st.live[::3] = False                                  # dead before the first call
         for c, (first, steps) in enumerate(calls):
@@ -127,7 +147,7 @@ def test_lanes_are_refilled_and_each_point_keeps_its_bits(rng):
             assert use.rounds == _rounds_with_refill(list(busy[c]), W, block), (W, block, first)
             its = st.iterations.sum() - before_its                # one lane: the group's iterations are its own
             assert use.iterations == its if W == 1 else its <= W * use.iterations < W * its
-            if (W, block, c) == (kernel.LANES, 64, 0):
+            if block == 64 and W > 1 and c == 0:
                 fixed = sum(max(busy[0, i:i + W]) for i in range(0, n, W))
                 assert use.rounds < fixed                          # dead lanes were refilled
         states[W, block] = st
@@ -150,10 +170,10 @@ def test_dead_points_are_skipped_and_live_ones_packed():
     assert eng.advance(st, 6, 0, lanes=kernel.LANES).rounds == 0 and st.steps.sum() == 40
 
 
-def test_lanes_must_be_one_or_the_kernels_width():
+def test_lanes_must_be_one_or_a_kernel_width():
     sy = integrators.system("point_vortices")
     eng = integrators.Engine(sy, integrators.tableau("GLRK1"), "none", 0.1)
-    with pytest.raises(ValueError, match="lanes must be 1 or"):
+    with pytest.raises(ValueError, match="lanes must be 1, 8 or 16, got 3"):
         eng.advance(eng.state(np.array([sy.defaults["q0"]])), 1, 1, lanes=3)
 
 
