@@ -240,8 +240,11 @@ def cmd_run(args) -> int:
                   "(keep that folder beside the file to resume it)", flush=True)
         from .engine import kernel_cached
         if not kernel_cached():
-            print("compiling the step engine (once per machine: about 50 s on 2 cores, before the first pair; "
+            print("compiling the step engine (once per machine: 1-2 minutes on 2 cores, before the first pair; "
                   "the pairs' wall times below do not include it) ...", flush=True)
+            from .service.driver import compile_first
+            system = scene.system()
+            compile_first(scene, system, scene.points(system).shape[0], comm.size)
     note = None
     if comm.rank == 0 and len(scene.projections) > 1:      # the scene compares projections: can it?
         from .audit.discrimination import discrimination

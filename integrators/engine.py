@@ -68,6 +68,47 @@ def kernel_cached() -> bool:
         return True
 
 
+def compile_kernel(d, W, precision="double"):
+    """Compile (or load from numba's cache) the kernel's specialisation for dimension ``d``, ``W``
+    lanes and ``precision``.  A specialisation depends on nothing else (a system enters as function
+    pointers of one type, the tableau and the projection as data), so a stand-in system of that
+    dimension (ϑ and H polynomials) compiles the one every system of dimension d uses."""
+    import sympy
+    from .systems import system_from
+    from .tableaus import tableau
+    q = sympy.symbols(f"x0:{d}")
+    theta = [q[i + 1] if i % 2 == 0 else -q[i - 1] for i in range(d)]
+    sy = system_from(theta, sum(x * x for x in q) / 2, list(q), name="kernel_stand_in")
+    eng = Engine(sy, tableau("GLRK1"), "none", 0.1, precision=precision)
+    st = eng.state(np.ones((W, d)))
+    st.live[:] = False
+    eng.advance(st, 1, 1, lanes=W)
+
+
+def compile_kernels(specs):
+    """Compile the kernel specialisations ``specs`` ((d, W, precision) each) at the same time, one
+    child process each, at most one per core: a first run that needs several (16 and 8 lanes, say)
+    waits for the longest instead of their sum.  The children only fill numba's cache; the caller
+    then loads them.  Returns the specs whose child failed (the caller compiles those itself, and
+    meets their error there)."""
+    import subprocess
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [x for x in os.environ.get("PYTHONPATH", "").split(
+        os.pathsep) if x]))
+    env.pop("OMPI_COMM_WORLD_RANK", None)
+    for key in [k for k in env if k.startswith(("PMI_", "MPI_LOCAL", "HYDRA_"))]:
+        env.pop(key)                    # a child is no MPI rank of the run
+    code = "import sys, integrators.engine as e; e.compile_kernel(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3])"
+    failed, pending = [], list(specs)
+    cores = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+    while pending:
+        batch, pending = pending[:cores], pending[cores:]
+        procs = [(spec, subprocess.Popen([sys.executable, "-c", code, str(spec[0]), str(spec[1]), spec[2]], env=env,
+                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)) for spec in batch]
+        failed += [spec for spec, p in procs if p.wait() != 0]
+    return failed
+
+
 def get_threads() -> int:
     import numba
     return numba.get_num_threads()
@@ -284,6 +325,22 @@ class Engine:
         from .kernel import lane_width
         return lane_width(self.nz)
 
+    def lanes_for(self, n, double_double=False):
+        """The W a call on ``n`` points takes by default: 1 below kernel.LANES points, else
+        :attr:`width` (kernel.LANES for double-double states)."""
+        from .kernel import LANES
+        return 1 if n < LANES else (LANES if double_double else self.width)
+
+    def warm(self, q):
+        """Compile now (or load from numba's cache) what a call on the points ``q`` (n, d) will run:
+        the kernel's specialisation for this dimension, precision and default W, and the system's
+        point function of that W.  Nothing is advanced (the state's points are not live)."""
+        q = np.asarray(q, dtype=np.float64)
+        W = self.lanes_for(q.shape[0], self.precision == "double-double")
+        st = self.state(np.repeat(q[:1], W, axis=0))
+        st.live[:] = False
+        self.advance(st, 1, 1, lanes=W)
+
     def _layout(self):
         """kernel.layout of this pair as the three int64 arrays the kernel takes."""
         if not hasattr(self, "_lay"):
@@ -315,10 +372,7 @@ class Engine:
         (how many group steps the lanes took)."""
         from . import kernel
         dd = state.q.ndim == 3
-        if lanes is None:
-            W = 1 if state.q.shape[0] < kernel.LANES else (kernel.LANES if dd else self.width)
-        else:
-            W = lanes
+        W = self.lanes_for(state.q.shape[0], dd) if lanes is None else lanes
         if W not in (1, kernel.LANES, kernel.WIDE) or (dd and W == kernel.WIDE):
             widths = f"1 or {kernel.LANES}" if dd else f"1, {kernel.LANES} or {kernel.WIDE}"
             raise ValueError(f"lanes must be {widths}, got {lanes!r}")

@@ -228,7 +228,48 @@ def _preflight(comm, scene, path, resume, force):
     _agree(comm, error)
     q0 = scene.points(system)
     _agree(comm, _trial_output(scene, system, q0) if comm.rank == 0 else None)
+    _warm(comm, scene, system, q0)
     return system, q0, grown_from
+
+
+def _warm(comm, scene, system, q0):
+    """Compile (or load) every kernel specialisation this rank's points will take before the first
+    pair, so that no pair's wall time holds a compilation: a scene whose pairs need 16 lanes and 8
+    lanes (Engine.width) would otherwise compile the second width inside the first pair that needs it.
+    On a machine that has compiled no kernel yet, rank 0 first compiles the ones the scene needs at
+    the same time, one process each (engine.compile_kernels); every rank then loads them."""
+    lo, hi = split(q0.shape[0], comm.size)[comm.rank]
+    mine = q0[lo:hi] if hi > lo else q0[:1]
+    engines = _kernel_engines(scene, system, mine.shape[0])
+    if comm.rank == 0:
+        compile_first(scene, system, q0.shape[0], comm.size)
+    comm.bcast(None, root=0)            # the other ranks load what rank 0's children compiled
+    for engine in engines.values():
+        engine.warm(mine)
+
+
+def _kernel_engines(scene, system, n):
+    """{(precision, W): an engine of the scene} for the kernel specialisations n points take."""
+    engines = {}
+    for pair in scene.pairs:
+        if not pair.step_map:
+            engine = _engine_maker(scene, system, pair)[0]()
+            engines.setdefault((engine.precision, engine.lanes_for(n, engine.precision == "double-double")), engine)
+    return engines
+
+
+def compile_first(scene, system, n, ranks=1):
+    """On a machine that has compiled no kernel yet, compile the specialisations a run of the scene
+    on ``ranks`` ranks will take at the same time, one process each (engine.compile_kernels); they
+    then load from numba's cache.  Does nothing once any kernel is cached."""
+    from ..engine import compile_kernels, kernel_cached
+    if kernel_cached():
+        return
+    keys = set()
+    for lo, hi in split(n, ranks):
+        keys |= set(_kernel_engines(scene, system, max(hi - lo, 1)))
+    if len(keys) > 1:
+        compile_kernels([(system.d, W, precision) for precision, W in sorted(keys)])
 
 
 @dataclasses.dataclass
