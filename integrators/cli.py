@@ -243,8 +243,11 @@ def cmd_run(args) -> int:
             print("compiling the step engine (once per machine: 1-2 minutes on 2 cores, before the first pair; "
                   "the pairs' wall times below do not include it) ...", flush=True)
             from .service.driver import compile_first
-            system = scene.system()
-            compile_first(scene, system, scene.points(system).shape[0], comm.size)
+            try:                        # only a head start: whatever fails here, the preflight reports
+                system = scene.system()
+                compile_first(scene, system, scene.points(system).shape[0], comm.size)
+            except Exception:
+                pass
     note = None
     if comm.rank == 0 and len(scene.projections) > 1:      # the scene compares projections: can it?
         from .audit.discrimination import discrimination

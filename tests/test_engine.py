@@ -248,3 +248,15 @@ def test_warm_compiles_the_width_a_call_will_take_and_advances_nothing():
         before = st.q.copy()
         eng.warm(st.q)
         assert np.array_equal(st.q, before) and st.steps.sum() == 0
+
+
+def test_compile_kernels_names_the_children_that_failed():
+    """engine.compile_kernels runs each specialisation in a child process and returns the ones that
+    failed, for the caller to compile itself (an odd dimension has no stand-in system), and
+    compile_kernel gives the specialisation it names."""
+    from integrators import kernel
+    from integrators.engine import compile_kernel, compile_kernels
+    assert compile_kernels([(3, 8, "double")]) == [(3, 8, "double")]
+    compile_kernel(2, 1)
+    assert any(str(sig[13]) == "UniTuple(int64 x 1)" and str(sig[11]) == "UniTuple(int64 x 2)"
+               and "complex" not in str(sig[10]) for sig in kernel.advance.signatures)
