@@ -320,16 +320,18 @@ class Engine:
 
     @property
     def width(self):
-        """W of this pair's vector path on real states: kernel.WIDE (16) for Newton systems of at most
-        kernel.WIDE_NZ unknowns, kernel.LANES (8) above (:func:`integrators.kernel.lane_width`)."""
+        """W of this pair's vector path on real states of many points: kernel.WIDE (16) for Newton
+        systems of at most kernel.WIDE_NZ unknowns, kernel.LANES (8) above
+        (:func:`integrators.kernel.lane_width`)."""
         from .kernel import lane_width
         return lane_width(self.nz)
 
     def lanes_for(self, n, double_double=False):
-        """The W a call on ``n`` points takes by default: 1 below kernel.LANES points, else
-        :attr:`width` (kernel.LANES for double-double states)."""
-        from .kernel import LANES
-        return 1 if n < LANES else (LANES if double_double else self.width)
+        """The W a call on ``n`` points takes by default: 1 below kernel.LANES points; kernel.LANES
+        for double-double states; else :func:`integrators.kernel.lane_width` (16 lanes for a small
+        Newton system and at least kernel.WIDE_POINTS points, 8 otherwise)."""
+        from .kernel import LANES, lane_width
+        return 1 if n < LANES else (LANES if double_double else lane_width(self.nz, n))
 
     def warm(self, q):
         """Compile now (or load from numba's cache) what a call on the points ``q`` (n, d) will run:
@@ -367,8 +369,7 @@ class Engine:
         """Steps number first … first + nsteps − 1 (step k aims at t0 + k·h) for every live point.
 
         ``lanes``: W, points advanced together in SIMD lanes (1, kernel.LANES or kernel.WIDE; None:
-        :attr:`width` for real states of at least kernel.LANES points, LANES for double-double
-        ones, else 1).  Any choice gives the same bits.  Returns the :class:`LaneUse` of the call
+        :meth:`lanes_for` the state's points).  Any choice gives the same bits.  Returns the :class:`LaneUse` of the call
         (how many group steps the lanes took)."""
         from . import kernel
         dd = state.q.ndim == 3

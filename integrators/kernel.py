@@ -64,13 +64,17 @@ WIDE = 16               # W for small Newton systems (nz <= WIDE_NZ, real states
 WIDE_NZ = 12            # lanes, whose independent chains hide each other's latency in the LU and the
 #                         solve (GLRK1 and GLRK2 with any projection, SRK3 unprojected at d = 4);
 #                         above 12 unknowns 16 lanes' scratch outgrows the L1 cache and lose
-#                         (docs/benchmarks.md, "Sixteen lanes for small systems").
+#                         (docs/benchmarks.md, "Sixteen lanes for small Newton systems").
+WIDE_POINTS = 1024      # ... and only for calls of at least this many points: a second width is a
+#                         second compilation of the kernel (~35 s a dimension), paid where a run is
+#                         long enough to gain it back, not by every small scene and test.
 
 
-def lane_width(nz):
-    """W of a real state's vector path for a pair with ``nz`` Newton unknowns: WIDE up to WIDE_NZ,
-    LANES above.  Any W gives a point the same bits (tests/test_lanes.py)."""
-    return WIDE if nz <= WIDE_NZ else LANES
+def lane_width(nz, n=WIDE_POINTS):
+    """W of a real state's vector path for a pair with ``nz`` Newton unknowns and a call on ``n``
+    points (n >= LANES): WIDE up to WIDE_NZ unknowns for at least WIDE_POINTS points, else LANES.
+    Any W gives a point the same bits (tests/test_lanes.py)."""
+    return WIDE if nz <= WIDE_NZ and n >= WIDE_POINTS else LANES
 
 # -- the projection as the kernel reads it ------------------------------------------------------
 

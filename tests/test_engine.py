@@ -229,17 +229,18 @@ def test_tolerances_are_runtime_data():
 def test_warm_compiles_the_width_a_call_will_take_and_advances_nothing():
     """Engine.warm(q) compiles the kernel specialisation and lane function that a call on q will
     use (the driver warms every pair's before the first pair, so no pair's wall time holds a
-    compilation): 16 lanes for GLRK2-symmetric (12 unknowns), 8 for GLRK4-symmetric (20), 1 for
-    fewer than 8 points; nothing is advanced."""
+    compilation): 16 lanes for GLRK2-symmetric (12 unknowns) on kernel.WIDE_POINTS points, 8 for
+    GLRK4-symmetric (20), 1 for fewer than 8 points; nothing is advanced."""
     from integrators import kernel
     sy = integrators.system("guiding_centre_symmetric")
-    q0 = np.tile(sy.defaults["q0"], (20, 1))
+    q0 = np.tile(sy.defaults["q0"], (kernel.WIDE_POINTS, 1))
 
     def widths():
         return {len(sig[13]) for sig in kernel.advance.signatures
                 if "complex" not in str(sig[10]) and "UniTuple(int64 x 4)" in str(sig[11])}
 
-    for tab, proj, n, W in (("GLRK2", "symmetric", 20, 16), ("GLRK4", "symmetric", 20, 8), ("GLRK4", "symmetric", 5, 1)):
+    for tab, proj, n, W in (("GLRK2", "symmetric", kernel.WIDE_POINTS, 16), ("GLRK4", "symmetric", 20, 8),
+                            ("GLRK4", "symmetric", 5, 1)):
         eng = integrators.Engine(sy, integrators.tableau(tab), proj, 1.0)
         assert eng.lanes_for(n) == W
         eng.warm(q0[:n])
