@@ -408,7 +408,7 @@ def point_functions(system, complex_step=False, lanes=False, precision="double")
                 mod._lanes_dd = None
         return mod._lanes_dd, _load(system).inside
     mod = _load(system)
-    if lanes is not True and lanes == WIDE:
+    if lanes == WIDE:                # (True, the LANES-lane function, is 1, never WIDE)
         if not hasattr(mod, "_lanes_wide"):
             try:
                 mod._lanes_wide = mod.lanes_wide()

@@ -95,8 +95,7 @@ def compile_kernels(specs):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [x for x in os.environ.get("PYTHONPATH", "").split(
         os.pathsep) if x]))
-    env.pop("OMPI_COMM_WORLD_RANK", None)
-    for key in [k for k in env if k.startswith(("PMI_", "MPI_LOCAL", "HYDRA_"))]:
+    for key in [k for k in env if k.startswith(("PMI_", "MPI_LOCAL", "HYDRA_", "OMPI_"))]:
         env.pop(key)                    # a child is no MPI rank of the run
     code = "import sys, integrators.engine as e; e.compile_kernel(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3])"
     failed, pending = [], list(specs)
