@@ -61,22 +61,23 @@ def test_checkpoint_cadence_and_batches_follow_the_measured_interval():
 
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_results_are_bitwise_identical_for_1_2_3_5_8_and_16_ranks(tmp_path):
+def test_results_are_bitwise_identical_for_1_2_3_5_and_8_ranks(tmp_path):
     """Every dataset of the file, invariants and checkpoints included, is the same bits for any rank
-    count (8 and 16 ranks on this machine's cores are oversubscribed: slower, never different).  The
-    2 sets' tasks turn over the ranks batch by batch: at 16 ranks 14 ranks hold no task in a batch,
-    and the 464 points are blocks of 29."""
+    count (8 ranks on this machine's cores are oversubscribed: slower, never different).  The 2
+    sets' tasks turn over the ranks batch by batch: at 8 ranks 6 ranks hold no task in a batch, and
+    the 464 points are blocks of 58.  (16 ranks gave the same bits too; on 2 cores that run alone
+    took 24 s, so the suite leaves it out.)"""
     scene = tmp_path / "small.toml"
     scene.write_text(SMALL)
     files = {}
-    for n in (None, 2, 3, 5, 8, 16):
+    for n in (None, 2, 3, 5, 8):
         out = tmp_path / f"r{n or 1}.h5"
         r = poincare("run", str(scene), "-o", str(out), "-q", n=n)
         assert r.returncode == 0, r.stderr
         if n:
             assert f"{n} ranks" in r.stdout
         files[n or 1] = dump(out)
-    for n in (2, 3, 5, 8, 16):
+    for n in (2, 3, 5, 8):
         assert same(files[1], files[n]), n
 
 
