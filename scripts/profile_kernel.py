@@ -5,8 +5,9 @@
 cProfile sees nothing inside the kernel and this machine's perf has no hardware counters, so this
 script builds an instrumented copy of the package in a temporary folder: the same kernel source with
 ``llvm.readcyclecounter`` (rdtsc) read around its parts — the residual iterations with and without a
-fresh Jacobian, the LU factorisation, the solve, the update and convergence test, a step's attempt,
-a retry, a whole step — and counters of iterations, factorisations and retries; caching off.  It
+fresh Jacobian, the LU factorisation, the solve, the update and convergence test, the system's point functions
+(inside the residual), a step's attempt, a whole step — and counters of iterations,
+factorisations and second tries; caching off.  It
 runs the benchmark's points (guiding_centre_symmetric, h = 10, 10⁴ points near the default loop
 and spread over its bounding box; with ``--orbit`` one trajectory of 20,000 steps) one thread, and
 prints cycles per group-step (W = 8 points; per step for an orbit).  The counters are calls of
@@ -75,17 +76,23 @@ PATCHES = [
     ("        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh)\n",
      "        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh)\n"
      "        t0 = _tick(4, t0)\n"),
-    ("    _attempt(ld(f, F.have) != 0.0, guess, at(w, S.mu), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr,\n"
-     "             cfg)\n",
-     "    t0 = _rdtsc()\n    _attempt(ld(f, F.have) != 0.0, guess, at(w, S.mu), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip,"
-     " IP, qr,\n             cfg)\n    t0 = _tick(5, t0)\n"),
-    ("        _attempt(_none(f, F), guess, at(w, S.zero), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)\n",
-     "        t0 = _rdtsc()\n        _attempt(_none(f, F), guess, at(w, S.zero), ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F,"
-     " ip, IP, qr, cfg)\n        t0 = _tick(6, t0)\n        _count(12)\n"),
-    ("            if not _step(t0 + (first + j) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):\n"
-     "                break\n",
-     "            tt = _rdtsc()\n            ok_ = _step(t0 + (first + j) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip,"
-     " IP, qr, cfg)\n            tt = _tick(7, tt)\n            _count(13)\n            if not ok_:\n                break\n"),
+    ("        ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),\n"
+     "           raw(at(dH, i * d)), raw(at(HH, i * dd)))\n",
+     "        t9 = _rdtsc()\n        ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),\n"
+     "           raw(at(dH, i * d)), raw(at(HH, i * dd)))\n        _tick(8, t9)\n"),
+    ("    ev(raw(x), k, need, raw(at(w, S.pth + slot * d)), raw(at(w, S.pT + slot * dd)),\n"
+     "       raw(at(w, S.pTT + slot * dd * d)), raw(at(w, S.pdH + slot * d)), raw(at(w, S.pHH + slot * dd)))\n",
+     "    t9 = _rdtsc()\n    ev(raw(x), k, need, raw(at(w, S.pth + slot * d)), raw(at(w, S.pT + slot * dd)),\n"
+     "       raw(at(w, S.pTT + slot * dd * d)), raw(at(w, S.pdH + slot * d)), raw(at(w, S.pHH + slot * dd)))\n"
+     "    _tick(8, t9)\n"),
+    ("    _attempt(mand(ld(f, F.have) != 0.0, mnot(again)), guess, mug, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip,\n"
+     "             IP, qr, cfg)\n",
+     "    t0 = _rdtsc()\n    _attempt(mand(ld(f, F.have) != 0.0, mnot(again)), guess, mug, ev, inside, k, h, tb, plan, d, s, nz, w,"
+     " S, f, F, ip,\n             IP, qr, cfg)\n    t0 = _tick(5, t0)\n    if anyl(again):\n        _count(12)\n"),
+    ("        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP,\n"
+     "                     qr, cfg)\n",
+     "        tt = _rdtsc()\n        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, kp, h, tb, plan, d, s, nz, w,"
+     " S, f, F, ip, IP,\n                     qr, cfg)\n        tt = _tick(7, tt)\n        _count(13)\n"),
 ]
 
 CHILD = r'''
@@ -100,7 +107,7 @@ q0 = invariants.loop("guiding_centre", 10000)
 sets = {"loop": q0 + 1e-3 * rng.standard_normal(q0.shape)}
 lo, hi = q0.min(0), q0.max(0)
 sets["box"] = lo + (hi - lo) * rng.random(q0.shape)
-names = ["jacobian it.", "residual it.", "factorise", "solve", "update+judge", "attempt", "retry", "step"]
+names = ["jacobian it.", "residual it.", "factorise", "solve", "update+judge", "attempt", "", "step", "point fns"]
 orbit = sys.argv[1] == "1"
 for pair in sys.argv[2:]:
     tab, proj = pair.split("-")
@@ -111,7 +118,7 @@ for pair in sys.argv[2:]:
         steps = 20000 if orbit else 10
         t = time.perf_counter(); eng.advance(st, 3, steps); w = time.perf_counter() - t
         g = P[13]
-        print(f"{pair:16s} {nm:5s} {q.shape[0] * steps / w:11,.0f}/s | " + "  ".join(f"{n} {P[i] / g:6.0f}" for i, n in enumerate(names))
+        print(f"{pair:16s} {nm:5s} {q.shape[0] * steps / w:11,.0f}/s | " + "  ".join(f"{n} {P[i] / g:6.0f}" for i, n in enumerate(names) if n)
               + f" | iterations {P[10] / g:.2f} factorisations {P[14] / g:.2f} retries {P[12] / g:.3f}", flush=True)
 '''
 
