@@ -238,6 +238,11 @@ def cmd_run(args) -> int:
             from .service.checkpoints import state_dir
             print(f"checkpoints: every rank writes its points' state into '{_printable(state_dir(out))}' "
                   "(keep that folder beside the file to resume it)", flush=True)
+        from .engine import Tolerances
+        if scene.jacobian_refresh != Tolerances.refresh:
+            print(f"Newton: a fresh Jacobian after an iteration that contracted by less than "
+                  f"{scene.jacobian_refresh:g} (run.jacobian_refresh; default {Tolerances.refresh:g}): "
+                  "results differ from the default's in their last bits", flush=True)
         from .engine import kernel_cached
         if not kernel_cached():
             print("compiling the step engine (once per machine: 1-2 minutes on 2 cores, before the first pair; "

@@ -487,3 +487,33 @@ def test_every_builtin_scene_validates():
             "charged_particle_tokamak"} <= names
     for name in names:
         load_scene(name)
+
+
+def test_the_jacobian_refresh_reaches_newton_and_is_part_of_the_scene(tmp_path):
+    """run.jacobian_refresh = 0.1: the stored points after 20 steps are bitwise those of the engine
+    with Tolerances(refresh=0.1) on the scene's points in the driver's calls, and differ from the default run's (0.01) in
+    their last bits only; a value outside (0, 1) is a one-line scene error, and a run file is not
+    resumed with another value."""
+    from integrators.engine import Engine, Tolerances
+    from integrators.service import reader
+    from integrators.service.scene import scene_differences
+    text = LV.replace("[run]\n", "[run]\nstore_points = true\n")
+    fast, plain = parse_scene(text.replace("[run]\n", "[run]\njacobian_refresh = 0.1\n")), parse_scene(text)
+    assert (fast.jacobian_refresh, plain.jacobian_refresh) == (0.1, Tolerances.refresh)
+    assert scene_differences(fast, plain) == ["run.jacobian_refresh"]
+    driver.run(fast, tmp_path / "fast.h5", progress=False)
+    driver.run(plain, tmp_path / "plain.h5", progress=False)
+    sy = fast.system()
+    for name in ("GLRK2-none", "GLRK2-symmetric"):
+        eng = Engine(sy, tableau("GLRK2"), name.split("-")[1], fast.h, tolerances=Tolerances(refresh=0.1))
+        st = eng.state(fast.loop_points())
+        for first in range(1, fast.steps, fast.output_every):   # the driver's calls; a checkpoint at
+            eng.advance(st, first, fast.output_every)            # every output (the scene's [output])
+            st.forget_jacobians()                                # drops the Newton factors
+        a = reader.read_run(tmp_path / "fast.h5")[name].points["loop"][-1]
+        b = reader.read_run(tmp_path / "plain.h5")[name].points["loop"][-1]
+        assert np.array_equal(a, st.q), name
+        assert not np.array_equal(a, b) and np.max(np.abs(a - b)) < 1e-12, name
+    for bad in ("0.0", "1.0", "-0.1", "1e400", '"often"'):
+        with pytest.raises(SceneError, match=r"run\.jacobian_refresh'? must be"):
+            parse_scene(text.replace("[run]\n", f"[run]\njacobian_refresh = {bad}\n"))

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from . import checkpoints, files, output, resumable, statuses
-from ..engine import Engine, MapEngine, State, march, set_threads
+from ..engine import Engine, MapEngine, State, Tolerances, march, set_threads
 from .clocks import Spent, pair_clock
 from .diagnostics import Diagnostics
 from .ranks import Planner, communicator, default_threads, split
@@ -496,7 +496,9 @@ def _engine_maker(scene, system, pair):
     h = scene.h
     if pair.step_map:
         return (lambda: MapEngine(scene.step_map(pair.label), system, h, pair.label)), 1
-    return (lambda: Engine(system, scene.tableau(pair.label), pair.projection, h, precision=scene.precision)), \
+    tolerances = Tolerances(refresh=scene.jacobian_refresh)
+    return (lambda: Engine(system, scene.tableau(pair.label), pair.projection, h, precision=scene.precision,
+                           tolerances=tolerances)), \
         scene.tableau(pair.label).s
 
 

@@ -60,6 +60,11 @@ A scene file::
                                           # specialisation): states, checkpoints and the energy, momentum
                                           # and constraint errors in double-double; the invariants from
                                           # the states rounded to double.  Not with step_maps.
+    jacobian_refresh = 0.01               # Newton takes a fresh Jacobian after an iteration that contracted
+                                          # by less than this (Tolerances.refresh; in (0, 1)).  0.1 ran
+                                          # GLRK2-, SRK3- and GLRK4-symmetric 1.4-1.7x faster on scattered
+                                          # points, GLRK1 0.83x; it changes every result's last bits
+                                          # (docs/benchmarks.md, "the levers that change bits")
 
     [output]
     path = "my-run.h5"
@@ -85,7 +90,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..engine import PRECISIONS
+from ..engine import PRECISIONS, Tolerances
 from ..projections import PROJECTIONS, admission
 from ..systems import SYSTEM_NAMES, system as builtin_system
 from ..tableaus import tableau as builtin_tableau
@@ -233,6 +238,7 @@ class Scene:
     tableau_files: dict = dataclasses.field(default_factory=dict)  # {label: path} of tableau TOML files
     step_maps: tuple = ()            # run.step_maps specs, in order
     precision: str = "double"        # run.precision: the engine's numbers ("double" or "double-double")
+    jacobian_refresh: float = Tolerances.refresh   # run.jacobian_refresh: Newton's refresh threshold
     _built: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)   # system, tableaus: made once
 
     @property
@@ -340,7 +346,8 @@ _SCHEMA = {
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
-            "forms": list, "diagnostics": list, "store_points": bool, "precision": str},
+            "forms": list, "diagnostics": list, "store_points": bool, "precision": str,
+            "jacobian_refresh": float},
     "output": {"path": str, "checkpoint_seconds": float, "checkpoints": str},
 }
 RUN_KEYS = tuple(_SCHEMA["run"])      # what integrators.service.run(..., **overrides) may set
@@ -408,6 +415,9 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     if precision != "double" and maps:
         raise SceneError("run.precision = \"double-double\" is the compiled engine's: a step map (run.step_maps) "
                          "runs in double; give it a scene of its own")
+    refresh = run.get("jacobian_refresh", Tolerances.refresh)
+    if not (math.isfinite(refresh) and 0 < refresh < 1):
+        raise SceneError(f"run.jacobian_refresh must be in (0, 1), got {refresh!r}")
     name = data.get("name", Path(origin).stem if origin != "<scene>" else "scene")
     for key, value in (("name", name), ("system.name", sysd.get("name", ""))):
         if not value.isprintable():
@@ -417,7 +427,8 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
                   tableaus=tabs, projections=projs, h=h, steps=steps, output_every=every, forms=forms,
                   diagnostics=diags, store_points=bool(run.get("store_points", False)), output=out, text=text,
                   checkpoint_seconds=ck_seconds, checkpoints=ck_mode,
-                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps, precision=precision)
+                  base=base, system_spec=spec, tableau_files=tableau_files, step_maps=maps, precision=precision,
+                  jacobian_refresh=float(refresh))
     _check_memory(scene, system)
     _check_points(scene, system)
     for label in {step_map_label(m) for m in maps}:
@@ -826,7 +837,8 @@ _KEYS = {"system_name": "system.name", "system_params": "system.params", "system
          "loop": "loop", "surface": "surface", "step_maps": "run.step_maps",
          "tableaus": "run.tableaus", "projections": "run.projections", "h": "run.h", "steps": "run.steps",
          "output_every": "run.output_every", "forms": "run.forms", "diagnostics": "run.diagnostics",
-         "store_points": "run.store_points", "precision": "run.precision"}
+         "store_points": "run.store_points", "precision": "run.precision",
+         "jacobian_refresh": "run.jacobian_refresh"}
 
 
 def scene_differences(a: Scene, b: Scene) -> list:
