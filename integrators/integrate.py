@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from .ddouble import divide_array
-from .engine import BLOCK, PRECISIONS, Engine, march
+from .engine import BLOCK, PRECISIONS, Engine, Tolerances, march
 from .tableaus import Tableau, tableau as builtin_tableau
 
 
@@ -101,7 +101,7 @@ def _checked_points(system, q0, p0, lam0):
 
 def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps=100, save_every=1,
               p0=None, lam0=None, t0=0.0, progress: Callable[[int, int], None] | None = None,
-              chunk: int | None = None, precision: str = "double") -> Solution:
+              chunk: int | None = None, precision: str = "double", tolerances: Tolerances | None = None) -> Solution:
     """Integrate points of a degenerate Lagrangian system with a (projected) VPRK method.
 
     Parameters
@@ -123,6 +123,10 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
         double-double ulps; q0, p0, lam0 are taken exactly as doubles, p0 defaults to ϑ(q0) in
         double-double, and every state comes back as two arrays whose exact sum is the result
         (``q`` and ``q_lo``, ``p`` and ``p_lo``, ``lam`` and ``lam_lo``).
+    tolerances : Newton's stopping and refresh rule (:class:`integrators.Tolerances`; default the
+        engine's).  ``Tolerances(refresh=0.1)`` refreshes the Jacobian less often: one orbit of
+        GLRK4- and GLRK6-symmetric 1.13x and 1.37x faster, GLRK1-none 0.90x, in last bits of its
+        own (docs/benchmarks.md, "the levers that change bits")
 
     Returns
     -------
@@ -135,7 +139,7 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
         raise ValueError(f"precision must be 'double' or 'double-double', got {precision!r}")
     if chunk is not None and (not float(chunk).is_integer() or int(chunk) < 1):
         raise ValueError(f"chunk must be a positive whole number of points, got {chunk!r}")
-    engine = Engine(system, tab, projection, h, precision=precision)
+    engine = Engine(system, tab, projection, h, precision=precision, tolerances=tolerances)
     state = engine.state(q0, p0, lam0)         # (double-double: the doubles taken exactly, ϑ(q0) in double-double)
     n = q0.shape[0]
     nsave = steps // save_every + 1

@@ -82,3 +82,23 @@ def test_convergence_order_on_point_vortices(tab, proj, order):
     errs = [np.max(np.abs(integrators.integrate(sy, q0, tableau=tab, projection=proj, h=h,
                                                 steps=round(1 / h)).q[-1, 0] - ref)) for h in hs]
     assert abs(fitted_order(hs, errs) - order) < 0.5, errs
+
+
+def test_tolerances_reach_the_engine():
+    """integrate(..., tolerances=Tolerances(refresh=0.1)): one orbit of 200 steps is bitwise the
+    engine's with that rule, refreshes less (more Newton iterations) and agrees with the default
+    rule's orbit to below 1e-11 relative: another rounding of the same solution."""
+    sy = integrators.system("guiding_centre_symmetric")
+    q0 = np.array(sy.defaults["q0"])[None]
+    rule = integrators.Tolerances(refresh=0.1)
+    fast = integrators.integrate(sy, q0, "GLRK4", "symmetric", h=10.0, steps=200, save_every=200, tolerances=rule)
+    plain = integrators.integrate(sy, q0, "GLRK4", "symmetric", h=10.0, steps=200, save_every=200)
+    eng = integrators.Engine(sy, integrators.tableau("GLRK4"), "symmetric", 10.0, tolerances=rule)
+    st = eng.state(q0)
+    eng.advance(st, 1, 200)
+    assert np.array_equal(fast.q[-1], st.q) and np.array_equal(fast.newton_iterations, st.iterations)
+    assert fast.newton_iterations.sum() > plain.newton_iterations.sum()
+    assert not np.array_equal(fast.q[-1], plain.q[-1])
+    assert np.max(np.abs(fast.q[-1] - plain.q[-1]) / np.abs(plain.q[-1]).clip(1.0)) < 1e-11
+    with pytest.raises(ValueError, match="tolerances must be"):
+        integrators.integrate(sy, q0, "GLRK4", "symmetric", h=10.0, steps=2, tolerances={"refresh": 0.1})
