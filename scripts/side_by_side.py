@@ -56,18 +56,21 @@ def measure(dump):
     sets = point_sets()
     out, states = {}, {}
 
+    laned = hasattr(kernel, "LANES")        # a tree before lanes (0581e1c): one point at a time
+
     def rate(tab, proj, q, steps, lanes):
         eng = integrators.Engine(gc, integrators.tableau(tab), proj, 10.0)
         best, its, W = 0.0, 0.0, 1
+        kw = {"lanes": lanes} if laned else {}
         for _ in range(3):
             st = eng.state(q)
-            eng.advance(st, 1, 2, lanes=lanes)
+            eng.advance(st, 1, 2, **kw)
             i0 = st.iterations.sum()
             t = time.perf_counter()
-            use = eng.advance(st, 3, steps, lanes=lanes)
+            use = eng.advance(st, 3, steps, **kw)
             best = max(best, q.shape[0] * steps / (time.perf_counter() - t))
             its = (st.iterations.sum() - i0) / (q.shape[0] * steps)
-            W = getattr(use, "W", lanes or kernel.LANES)
+            W = getattr(use, "W", lanes or kernel.LANES) if laned else 1
         return best, float(its), st, W
 
     for tab, proj in LANE_PAIRS:
