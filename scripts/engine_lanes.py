@@ -186,8 +186,11 @@ def main():
         eng = integrators.Engine(sy, tableau, proj, 10.0)
         set_threads(1)
 
-        # the previous kernel's layouts: E s × s, six tolerances
-        tab_old = kernel.flat_tableau(tableau, _lagrange_matrix(tableau.c - 1.0, tableau.c))
+        # the previous kernel's layouts (its engine's flat tableau: no d_lo, E s × s), six tolerances
+        parts = (tableau.a, tableau.a_lo, tableau.abar, tableau.abar_lo, tableau.b, tableau.b_lo,
+                 tableau.d if tableau.d is not None else np.zeros(tableau.s),
+                 _lagrange_matrix(tableau.c - 1.0, tableau.c))
+        tab_old = np.concatenate([np.asarray(x, dtype=np.float64).ravel() for x in parts])
 
         def run_old(st, first, n):
             old.advance(ev, inside, eng.k, tab_old, tuple(eng.plan), eng.h, 0.0, first, n, False, 64,
