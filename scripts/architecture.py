@@ -155,10 +155,8 @@ def driver_parts(graph) -> list:
     return lines
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--paper", help="the paper's LaTeX, to check the cited labels")
-    args = ap.parse_args()
+def render() -> tuple:
+    """(the text of docs/architecture.md, the import graph, the cited labels) from the source."""
     graph, cited = {}, {}
     mods = list(modules())
     known = {name for name, _, _ in mods}
@@ -190,8 +188,24 @@ def main():
     for label in sorted(cited, key=lambda x: (order[x.split(":")[0]], x)):
         where = sorted(set(cited[label]))
         lines.append(f"| `{label}` | {', '.join(f'`{w}`' for w in where)} |")
-    (ROOT / "docs" / "architecture.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote docs/architecture.md: {len(graph)} modules, {len(cited)} labels")
+    return "\n".join(lines) + "\n", graph, cited
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--paper", help="the paper's LaTeX, to check the cited labels")
+    ap.add_argument("--check", action="store_true", help="write nothing; exit 1 if docs/architecture.md is not "
+                                                         "what the source gives")
+    args = ap.parse_args()
+    text, graph, cited = render()
+    target = ROOT / "docs" / "architecture.md"
+    if args.check:
+        if target.read_text() != text:
+            print("docs/architecture.md is out of date: run python scripts/architecture.py")
+            return 1
+    else:
+        target.write_text(text)
+        print(f"wrote docs/architecture.md: {len(graph)} modules, {len(cited)} labels")
     bad = violations(graph)
     if bad:
         print("imports across layers the wrong way:", "; ".join(bad))

@@ -115,3 +115,11 @@ def test_no_code_branches_on_a_projection_name():
                 if len(keys & names) >= 2:
                     found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert found == [], found
+
+
+def test_the_architecture_page_is_what_the_source_gives():
+    """docs/architecture.md is generated (scripts/architecture.py): a changed import that was not
+    regenerated is caught here (engine's imports of systems and tableaus were missing from it)."""
+    text, graph, _ = _architecture().render()
+    assert "| `integrators.kernel` |" in text and len(graph) > 20
+    assert (ROOT / "docs" / "architecture.md").read_text() == text, "run python scripts/architecture.py"
