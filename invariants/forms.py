@@ -39,24 +39,52 @@ class InvariantValue:
     """An invariant with its resolution monitor.
 
     value : float
-    resolution : relative size of the highest modes of the sampled set: of q (noncanonical), of q
-        and of p (canonical), of (q, hλ) together (corrected: hλ enters ϑ_λ as a displacement of q,
-        so round-off noise in a λ far smaller than q does not count as under-resolution)
+    resolution : the larger of two relative readings, each 0 for a set resolved to round-off:
+        the value's own error estimate over |value| (``error``/|value|), and the relative size of
+        the highest modes of the sampled set, as before (of q; of q and p, canonical; of (q, hλ)
+        together, corrected: hλ enters ϑ_λ as a displacement of q)
     under_resolved : resolution > UNDER_RESOLVED (1e-10)
+    error : the estimate, erring large, of |value − exact| from the spectra of what the value is
+        made of (docs/invariants.md, "The resolution monitor"): on a loop the aliasing of the
+        one-form's coefficients against q's modes (spectral.loop_pairing_error), on a surface the
+        Clenshaw–Curtis error of the integrand (spectral.surface_quadrature_error); plus the
+        round-off below
+    roundoff : the value's round-off relative to |value|: 8 ulps of the size of the terms summed,
+        which can be 10⁴ times the value where they cancel (a loop stretched by shear).  A floor of
+        the value's precision that more points do not lower, so not part of ``resolution``
     """
 
     value: float
     resolution: float
     under_resolved: bool
+    error: float = 0.0
+    roundoff: float = 0.0
 
     def __float__(self):
         return self.value
+
+
+def _value(value, error, roundoff, tail):
+    """The InvariantValue of a value with its error estimate, its round-off and its set's relative tail."""
+    value = float(value)
+    res = max(spectral.relative(error, value), tail)
+    return InvariantValue(value, res, res > UNDER_RESOLVED, float(error + roundoff), spectral.relative(roundoff, value))
+
+
+MIN_POINTS = 8           # the fewest points along a direction of a sample set
 
 
 def _check(q, ndim, what):
     q = np.asarray(q, dtype=float)
     if q.ndim != ndim:
         raise ValueError(f"{what} must have {ndim} dimensions, got shape {q.shape}")
+    layout = "(N, d): N points of d coordinates" if ndim == 2 else "(n_sigma, n_tau, d)"
+    few = [n for n in q.shape[:-1] if n < MIN_POINTS]
+    if few:
+        hint = (f"; given transposed? the layout is {layout}" if q.shape[-1] >= MIN_POINTS else
+                f" (the layout is {layout})")
+        raise ValueError(f"{what} has shape {q.shape}: at least {MIN_POINTS} points along each direction are needed "
+                         f"for a spectral value, got {min(few)}{hint}")
     if not np.all(np.isfinite(q)):
         raise ValueError(f"{what} contains non-finite values")
     return q
@@ -118,17 +146,30 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None) -> dict:
     q = _check(q, 2, "loop q")
     qh = spectral.fourier_coefficients(q)
     tail_q = spectral.loop_tail(q, qh)
+    half = q.shape[0] % 2 == 0 and q.shape[0] // 2 >= MIN_POINTS    # the every-other-point subset
+    qh2 = spectral.fourier_coefficients(q[::2]) if half else None
     out = {}
     for form in forms:
         A, Al = one_form_coefficients(q, form, system, p, lam, h)
-        value = spectral.loop_pairing(A, q, bh=qh)               # in Fourier space (Parseval)
+        ah = spectral.fourier_coefficients(A)
+        value = spectral.loop_pairing(A, q, bh=qh, ah=ah)        # in Fourier space (Parseval)
+        error, roundoff = spectral.loop_pairing_error(ah, qh, q.shape[0])
+        if half:
+            value2 = spectral.loop_pairing(A[::2], q[::2], bh=qh2)
         res = tail_q
         if Al is not None:
-            value += spectral.loop_pairing(Al, lam)
+            alh, lh = spectral.fourier_coefficients(Al), spectral.fourier_coefficients(lam)
+            value += spectral.loop_pairing(Al, lam, bh=lh, ah=alh)
+            e2, r2 = spectral.loop_pairing_error(alh, lh, q.shape[0])
+            error, roundoff = error + e2, roundoff + r2
+            if half:
+                value2 += spectral.loop_pairing(Al[::2], lam[::2])
             res = spectral.loop_tail(np.concatenate([q, h * lam], axis=-1))   # hλ has the units of q
+        if half:              # two estimates that err large: the smaller is the sharper, and still errs large
+            error = min(error, abs(float(value) - float(value2)))
         if form == "canonical":
-            res = max(res, spectral.loop_tail(p))
-        out[form] = InvariantValue(float(value), res, res > UNDER_RESOLVED)
+            res = max(res, spectral.loop_tail(p, ah))
+        out[form] = _value(value, error, roundoff, res)
     return out
 
 
@@ -260,7 +301,8 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
             integrand = omega["corrected"]
             hl2 = np.abs(h * spectral.chebyshev_coefficients(cl0, 1))      # λ's coefficients, scaled
             res = spectral.coefficient_tail(np.concatenate([cq2, hl2], axis=-1))   # hλ has the units of q
-        out[form] = InvariantValue(float(spectral.surface_integral(integrand)), res, res > UNDER_RESOLVED)
+        out[form] = _value(spectral.surface_integral(integrand), spectral.surface_quadrature_error(integrand),
+                           spectral.surface_roundoff(integrand), res)
     return out
 
 

@@ -52,6 +52,25 @@ def loop(shape="guiding_centre", n=2000, **params):
     raise ValueError(f"unknown loop shape '{shape}' (use 'guiding_centre', 'ellipse' or a callable)")
 
 
+def band_limited_loop(n, center, modes=20, decay=0.7, scale=None, seed=1):
+    """A loop whose coordinates have Fourier modes 1 … ``modes`` only, exactly: (n, d).
+
+    q(τ) = center + Σ_k (a_k cos 2πkτ + b_k sin 2πkτ), a_k, b_k normal with standard deviations
+    ``scale``·decay^k (``scale``: one number per coordinate, default 0.05 each) from
+    numpy's generator of ``seed``.  Smooth and band-limited: q's own top modes are zero for any n >
+    2·modes, while a one-form of q reaches further; the resolution monitor's test set (issue 57)."""
+    center = np.asarray(center, dtype=float)
+    d = center.size
+    scale = np.full(d, 0.05) if scale is None else np.asarray(scale, dtype=float)
+    tau = loop_parameters(n)
+    q = np.zeros((int(n), d)) + center
+    rng = np.random.default_rng(seed)
+    for k in range(1, modes + 1):
+        a = rng.normal(size=(2, d)) * scale * decay**k
+        q += a[0] * np.cos(TWO_PI * k * tau)[:, None] + a[1] * np.sin(TWO_PI * k * tau)[:, None]
+    return q
+
+
 def surface_parameters(n_sigma: int, n_tau: int):
     """Chebyshev points (σ, τ) on [0, 1]²: two arrays (n_σ, n_τ), σ along axis 0."""
     s, t = chebyshev_points(int(n_sigma)), chebyshev_points(int(n_tau))

@@ -15,8 +15,8 @@ name = "guiding_centre_symmetric"
 [loop]
 points = 16
 [surface]
-n_sigma = 6
-n_tau = 6
+n_sigma = 8
+n_tau = 8
 [run]
 tableaus = ["GLRK2"]
 projections = ["symmetric", "none"]

@@ -207,8 +207,8 @@ points = 16
 params = { d = 2, center = [1.0, 1.0], radii = [0.05, 0.05] }
 [surface]
 shape = "rectangle"
-n_sigma = 6
-n_tau = 6
+n_sigma = 8
+n_tau = 8
 params = { d = 2, center = [1.0, 1.0], size = [0.02, 0.02] }
 [run]
 tableaus = ["GLRK2"]
@@ -238,7 +238,7 @@ def test_a_double_double_scene_says_so_keeps_the_low_parts_and_resumes_bitwise(t
     assert run.precision == "double-double" and double.precision == "double"
     with h5py.File(full) as f:
         ck = f["runs/GLRK2-symmetric/checkpoint/a"]
-        assert ck["q"].shape == (52, 2, 2) and np.any(ck["q"][..., 1] != 0)
+        assert ck["q"].shape == (80, 2, 2) and np.any(ck["q"][..., 1] != 0)
     sym, sym_double = run["GLRK2-symmetric"].errors, double["GLRK2-symmetric"].errors
     assert np.max(sym["constraint"]) < 1e-26 < np.max(sym_double["constraint"])
     # the energy errors agree to double's round-off of them (the same truncation error)

@@ -444,7 +444,7 @@ def test_a_singular_a_says_what_is_accepted(tmp_path, text, words):
     (('name = "guiding_centre_symmetric"', 'name = "pendulum"'), "unknown system 'pendulum'"),
     (('name = "guiding_centre_symmetric"', 'name = "guiding_centre_symmetric"\nparams = { nu = 1.0 }'), "unknown parameter 'nu'"),
     (("points = 64", "points = 64\nparams = { u0 = nan }"), "not finite or outside the domain"),
-    (("points = 64", "points = 2"), "loop.points must be at least 3"),
+    (("points = 64", "points = 2"), "loop.points must be at least 8"),
     (("output_every = 4", "output_every = 0"), "run.output_every"),
     (("forms = [", "forms = ['magic', "), "unknown value 'magic'"),
     (("[run]", "[run]\ntableaus = 3\n"), "not valid TOML"),

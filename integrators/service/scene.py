@@ -22,7 +22,7 @@ A scene file::
 
     [system]                              # ... or guiding centres in a tokamak equilibrium (docs/equilibria.md)
     equilibrium = "eq.geqdsk"             # a G-EQDSK file, next to the scene or in the current directory
-    cocos = 3                             # its sign conventions (COCOS index; default 3)
+    cocos = 3                             # its sign conventions (COCOS index; default: identified from the file)
     params = { mu = 1e-5 }                # the magnetic moment (default from the plasma's size and field)
 
     [loop]                                # optional: a closed loop of sample points
@@ -94,6 +94,7 @@ from ..engine import PRECISIONS, Tolerances
 from ..projections import PROJECTIONS, admission
 from ..systems import SYSTEM_NAMES, system as builtin_system
 from ..tableaus import tableau as builtin_tableau
+from invariants.forms import MIN_POINTS
 
 FORMS = ("canonical", "noncanonical", "corrected")
 DIAGNOSTICS = ("energy", "momentum", "constraint")
@@ -528,16 +529,17 @@ def _sets_of(data):
         if "points" not in data["loop"]:
             raise SceneError("missing key 'loop.points'")
         loop = LoopSpec(**data["loop"])
-        if loop.points < 3:
-            raise SceneError(f"loop.points must be at least 3, got {loop.points}")
+        if loop.points < MIN_POINTS:
+            raise SceneError(f"loop.points must be at least {MIN_POINTS} (a spectral value needs them), got {loop.points}")
     if "surface" in data:
         for k in ("n_sigma", "n_tau"):
             if k not in data["surface"]:
                 raise SceneError(f"missing key 'surface.{k}'")
         surface = SurfaceSpec(**data["surface"])
         for k in ("n_sigma", "n_tau"):
-            if getattr(surface, k) < 2:
-                raise SceneError(f"surface.{k} must be at least 2, got {getattr(surface, k)}")
+            if getattr(surface, k) < MIN_POINTS:
+                raise SceneError(f"surface.{k} must be at least {MIN_POINTS} (a spectral value needs them), got "
+                                 f"{getattr(surface, k)}")
     for set_ in (loop, surface):
         if set_ is not None and set_.refine_to is not None and set_.levels == 0:
             raise SceneError(f"{set_.name}.refine_to = {set_.refine_to:,} allows no refinement: the {set_.name}'s "
@@ -605,12 +607,11 @@ def _make_system(spec, params, base):
     """A System from a scene's [system] table: built-in by name, from ϑ and H, a user function, or
     an equilibrium file."""
     if "equilibrium" in spec:
-        from ..equilibrium import DEFAULT_COCOS, EquilibriumError, system_from_geqdsk
+        from ..equilibrium import EquilibriumError, system_from_geqdsk
         rest = {k: v for k, v in params.items() if k != "mu"}
         try:
             made = system_from_geqdsk(_data_file(spec["equilibrium"], base, "system.equilibrium: file"),
-                                      mu=params.get("mu", None),
-                                      cocos=DEFAULT_COCOS if spec.get("cocos") is None else spec["cocos"])
+                                      mu=params.get("mu", None), cocos=spec.get("cocos"))
             return made.with_params(**rest) if rest else made
         except EquilibriumError as exc:
             raise SceneError(f"system.equilibrium: {exc}") from None
@@ -877,3 +878,57 @@ def scene_source(spec: str | None) -> tuple:
     except OSError as exc:
         raise SceneError(f"cannot read scene '{spec}': {exc.strerror or exc}") from None
     return text, path
+
+
+def equilibrium_scene(path, cocos=None, *, name=None, steps=1000, output=None) -> str:
+    """The TOML text of a scene built from a G-EQDSK file's own defaults (docs/equilibria.md), as
+    the built-in ``freegs_dn`` is built from its file: the loop (2,048 points, refining to 8,192) a
+    circle in (R, Z) of radius a/500 (a the boundary's half-width) around the passing guiding centre
+    ``defaults["q0"]``, the surface (24 × 24, refining to 47 × 47) a square of side a/250 around a
+    trapped one at the same place (u = 0.15 v), h = ``defaults["h"]``, GLRK1 and GLRK2 with every
+    projection, every form.  Save it, edit it, run it: ``poincare run file.toml``."""
+    from ..equilibrium import system_from_geqdsk
+    sy = system_from_geqdsk(path, cocos=cocos)
+    p = sy.param_values
+    a = (p["R_max"] - p["R_min"]) / 2
+    R0, Z0, _, u0 = sy.defaults["q0"]
+    v = sy.defaults["speed"]
+    stem = Path(str(path)).name
+    name = name or "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in Path(stem).stem) or "equilibrium"
+
+    def vec(*x):
+        return ", ".join(repr(float(c)) for c in x)
+    cocos_line = f"cocos = {sy.defaults['cocos']}" + ("" if cocos is not None else "            # identified from the file")
+    return f'''# Guiding centres in {stem}, from the system's own defaults (integrators.service.scene.equilibrium_scene).
+# {'; '.join(sy.defaults['notes'])}
+name = "{name}"
+
+[system]
+equilibrium = "{stem}"
+{cocos_line}
+params = {{ mu = {p['mu']:.17g} }}
+
+[loop]
+shape = "ellipse"
+points = 2048
+refine_to = 8192
+params = {{ d = 4, center = [{vec(R0, Z0, 0.0, u0)}], radii = [{vec(a / 500, a / 500)}], plane = [0, 1] }}
+
+[surface]
+shape = "rectangle"
+n_sigma = 24
+n_tau = 24
+refine_to = 2209
+params = {{ d = 4, center = [{vec(R0, Z0, 0.0, 0.15 * v)}], size = [{vec(a / 250, a / 250)}], plane = [0, 1] }}
+
+[run]
+tableaus = ["GLRK1", "GLRK2"]
+projections = ["none", "standard", "symmetric", "symplectic", "midpoint"]
+h = {sy.defaults['h']!r}
+steps = {int(steps)}
+output_every = {max(1, int(steps) // 100)}
+forms = ["canonical", "noncanonical", "corrected"]
+
+[output]
+path = "{output or name + '.h5'}"
+'''
