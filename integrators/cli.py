@@ -293,11 +293,12 @@ def _equilibrium_note(scene) -> str:
     q = sy.defaults.get("q_check")
     qtext = (f"|q(ψ_N = 0.5)| {q[0]:.4g} from the field against {q[1]:.4g} in the file" if q
              else "the file has no q to check against")
-    from .equilibrium import DEFAULT_COCOS
-    cocos = spec.get("cocos") or DEFAULT_COCOS
+    cocos = sy.defaults.get("cocos")
+    how = "as given" if spec.get("cocos") is not None else "identified from the file"
+    notes = "".join(f"\nnote: {_printable(n)}" for n in sy.defaults.get("notes", ()))
     return (f"note: the field is the quintic-spline interpolant of {_printable(spec['equilibrium'])} "
-            f"(sha256 {spec['sha256'][:12]}…), read as COCOS {cocos}; {qtext}; points leaving ψ_N < 1 break "
-            "down (docs/equilibria.md)")
+            f"(sha256 {spec['sha256'][:12]}…), read as COCOS {cocos} ({how}); {qtext}; points leaving ψ_N < 1 break "
+            f"down (docs/equilibria.md){notes}")
 
 
 def _energy_absolute_points(path) -> int:

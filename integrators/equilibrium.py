@@ -81,6 +81,8 @@ class Equilibrium:
     current: float
     B0: float
     R0: float
+    notes: tuple = ()        # what the reader identified or trusted, and why (one sentence each)
+    given: bool = False      # the COCOS was given (cocos=...), not identified
 
     def where(self):
         return Path(self.path).name
@@ -90,10 +92,39 @@ def _fail(path, msg):
     raise EquilibriumError(f"{Path(path).name}: {msg}")
 
 
-def read_geqdsk(path, cocos: int = DEFAULT_COCOS) -> Equilibrium:
-    """The checked contents of a G-EQDSK file (see the module's docstring for the checks)."""
+def identify_cocos(dpsi, current, field, q):
+    """The COCOS a G-EQDSK file's own signs say, as Sauter & Medvedev (2013) sec. 5 identify it, but
+    for the 2π of ψ (e_Bp), which the q check decides (:func:`system_from_geqdsk`): ``(base, reasons)``,
+    base ∈ {1, 3, 5, 7}, reasons one clause per sign.
+
+    σ_Bp = sign(ψ_boundary − ψ_axis)·sign(I_p);  σ_ρθφ = sign(q)·sign(I_p)·sign(B₀) with B₀'s sign
+    that of F (where the file has no q, σ_ρθφ = σ_Bp is assumed: it does not enter the field);
+    σ_RφZ = +1 ((R, φ, Z) right-handed) is assumed: no G-EQDSK quantity shows it."""
+    s_bp = 1 if (dpsi > 0) == (current > 0) else -1
+    why = [f"σ_Bp = {s_bp:+d}: ψ {'rises' if dpsi > 0 else 'falls'} from the axis to the boundary with I_p "
+           f"{'> 0' if current > 0 else '< 0'}"]
+    qs = q[np.isfinite(q) & (q != 0)] if q.size else q
+    if qs.size and (np.all(qs > 0) or np.all(qs < 0)):
+        s_rtp = int(np.sign(qs[0]) * np.sign(current) * np.sign(field))
+        why.append(f"σ_ρθφ = {s_rtp:+d}: q {'> 0' if qs[0] > 0 else '< 0'} with I_p·B₀ "
+                   f"{'> 0' if current * field > 0 else '< 0'}")
+    else:
+        s_rtp = s_bp
+        why.append(f"σ_ρθφ = {s_rtp:+d} assumed (no q of one sign; it does not enter the field)")
+    why.append("σ_RφZ = +1 assumed ((R, φ, Z) right-handed: no G-EQDSK quantity shows it; "
+               "say cocos = N + 1 for the even index)")
+    base = {(1, 1): 1, (-1, -1): 3, (1, -1): 5, (-1, 1): 7}[(s_bp, s_rtp)]
+    return base, why
+
+
+def read_geqdsk(path, cocos: int | None = None, e_bp: int | None = None) -> Equilibrium:
+    """The checked contents of a G-EQDSK file (see the module's docstring for the checks).
+
+    cocos : the file's COCOS index, or None to identify it from the file (:func:`identify_cocos`;
+        ψ per radian, e_Bp = 0, unless ``e_bp`` = 1 says ψ is the total flux)."""
     from freeqdsk import geqdsk
-    e_bp, sigma_bp, _, _ = cocos_signs(cocos)
+    if cocos is not None:
+        cocos_signs(cocos)
     path = str(path)
     p = Path(path)
     if not p.is_file():
@@ -133,28 +164,45 @@ def read_geqdsk(path, cocos: int = DEFAULT_COCOS) -> Equilibrium:
     dpsi = float(g.sibdry - g.simagx)
     if dpsi == 0.0:
         _fail(path, "ψ on the boundary equals ψ on the axis")
-    if g.cpasma == 0.0 or g.bcentr == 0.0:
-        _fail(path, f"I_p = {g.cpasma:g} A and B₀ = {g.bcentr:g} T: both must be non-zero to check the signs")
-    if np.sign(dpsi) != sigma_bp * np.sign(g.cpasma):
-        rises = "rises" if dpsi > 0 else "falls"
-        other = "1, 2, 5, 6, 11, 12, 15 or 16" if sigma_bp < 0 else "3, 4, 7, 8, 13, 14, 17 or 18"
-        _fail(path, f"ψ {rises} from the axis ({g.simagx:.6g}) to the boundary ({g.sibdry:.6g}) with I_p = "
-                    f"{g.cpasma:+.4g} A, which COCOS {cocos} does not allow (σ_Bp = {sigma_bp:+d}); the file looks "
-                    f"like COCOS {other}: give system.cocos (cocos=...)")
-    if np.any(np.sign(fpol) != np.sign(g.bcentr)):
-        _fail(path, f"F(ψ) changes sign or has the opposite sign to B₀ = {g.bcentr:+g} T")
-    scale = (2 * math.pi) ** e_bp
+    if np.any(fpol == 0) or not (np.all(fpol > 0) or np.all(fpol < 0)):
+        _fail(path, "F(ψ) = R B_φ changes sign or is zero: a toroidal field through zero is not a tokamak's")
+    field = float(np.sign(fpol[0]))
+    notes = []
+    if np.sign(g.bcentr) != field:         # the profiles make the field; the header's scalar is a summary
+        notes.append(f"the header's B₀ = {g.bcentr:+.4g} T {'is zero' if g.bcentr == 0 else 'has the opposite sign'}"
+                     f" to F(ψ) ({'> 0' if field > 0 else '< 0'}), which sets the field: F is trusted, the header's "
+                     "B₀ is not used")
+    q = np.asarray(g.qpsi, dtype=float) if g.qpsi is not None else np.zeros(0)
+    if not np.any(q) or not np.all(np.isfinite(q)):
+        q = np.zeros(0)                  # a file without q (all zeros): nothing to check it against
+    if cocos is None:
+        if g.cpasma == 0.0:
+            _fail(path, "I_p = 0 in the header: the COCOS cannot be identified without the current's sign; "
+                        "give system.cocos (cocos=...)")
+        base, why = identify_cocos(dpsi, float(g.cpasma), field, q)
+        cocos = base + 10 * int(e_bp or 0)
+        notes.insert(0, f"COCOS {cocos} identified from the file: " + "; ".join(why))
+        given = False
+    else:
+        given = True
+        if g.cpasma != 0.0:
+            base, why = identify_cocos(dpsi, float(g.cpasma), field, q)
+            _, sb_given, _, _ = cocos_signs(cocos)
+            _, sb_file, _, _ = cocos_signs(base)
+            if sb_given != sb_file:
+                notes.insert(0, f"cocos = {cocos} was given and is used, though the file's own signs say COCOS "
+                                f"{base} or {base + 10} ({why[0]}): the poloidal field is the reverse of what the "
+                                "file's current implies")
+    e, sigma_bp, _, _ = cocos_signs(cocos)
+    scale = (2 * math.pi) ** e
     box = (float(R[0]), float(R[-1]), float(Z[0]), float(Z[-1]))
     rb, zb = np.asarray(g.rbdry if g.rbdry is not None else []), np.asarray(g.zbdry if g.zbdry is not None else [])
     if rb.size >= 3 and zb.size == rb.size and np.all(np.isfinite(rb)) and np.all(np.isfinite(zb)):
         box = (max(box[0], float(rb.min())), min(box[1], float(rb.max())),
                max(box[2], float(zb.min())), min(box[3], float(zb.max())))
-    q = np.asarray(g.qpsi, dtype=float) if g.qpsi is not None else np.zeros(0)
-    if not np.any(q):
-        q = np.zeros(0)                  # a file without q (all zeros): nothing to check it against
     return Equilibrium(path=path, cocos=cocos, R=R, Z=Z, psi=(psi - g.simagx) / scale, psi_span=dpsi / scale,
-                       F=fpol, axis=(float(g.rmagx), float(g.zmagx)), box=box, q=q if np.all(np.isfinite(q)) else
-                       np.zeros(0), current=float(g.cpasma), B0=float(g.bcentr), R0=float(g.rcentr))
+                       F=fpol, axis=(float(g.rmagx), float(g.zmagx)), box=box, q=q, current=float(g.cpasma),
+                       B0=float(g.bcentr), R0=float(g.rcentr), notes=tuple(notes), given=given)
 
 
 def _data_format(path):
@@ -309,21 +357,58 @@ def safety_factor(system, psi_n=0.5, points=4000):
     return float(sol.y_events[0][0][2] / (2 * math.pi))
 
 
-def system_from_geqdsk(path, mu=None, cocos: int = DEFAULT_COCOS, check_q=True, name=None):
+def system_from_geqdsk(path, mu=None, cocos: int | None = None, check_q=True, name=None):
     """The guiding centre in the equilibrium of a G-EQDSK file (module docstring): a
     :class:`~integrators.systems.System` with q = (R, Z, φ, u), parameter ``mu`` (and the file's
     derived constants as parameters: sign_phi, sign_Bp, psi_span and the domain's box), symmetry
     ∂/∂φ (the toroidal momentum ϑ_φ is conserved).
 
+    cocos : the file's COCOS index, or None (the default) to identify it from the file: the signs
+        of ψ's rise, I_p, F and q (:func:`identify_cocos`), and the 2π of ψ (e_Bp) from the q check
+        (this field's |q(ψ_N = 0.5)| against the file's: a ratio 1 means ψ per radian, 1/2π total
+        flux).  A given index overrules the signs (with a note where the file's own signs differ);
+        a q check that fails under a given index is refused.  ``defaults["cocos"]`` is the index
+        used and ``defaults["notes"]`` says how it was found and what the reader trusted.
+
     Units are the file's (m, T) with charge/mass 1, so speeds set the orbits' width: a speed v has
     Larmor radius v/|B|.  The defaults are scaled to the plasma: the reference speed
     v = a|B_axis|/100 (a the boundary's half-width; a Larmor radius of 1 % of a), ``mu`` =
     v²/(4|B_axis|) when not given, and ``defaults`` holds ``q0`` (on the outboard midplane at
-    ψ_N ≈ 0.3 with u = v/√2), ``h`` (1/40 of the transit time 2π q R/|u|), ``axis``, ``speed`` (v) and
+    ψ_N ≈ 0.3 with u = v/√2), ``h`` (:func:`_default_h`), ``axis``, ``speed`` (v) and
     ``equilibrium`` (the path)."""
-    from .systems import System
     eq = read_geqdsk(path, cocos)
-    _, sigma_bp, sigma_rphiz, _ = cocos_signs(cocos)
+    system = _system_of(eq, path, mu, name)
+    notes = list(eq.notes)
+    if check_q and eq.q.size:
+        qfile = float(np.interp(0.5, np.linspace(0, 1, eq.q.size), np.abs(eq.q)))
+        qhere = safety_factor(system, 0.5)
+        ratio = qhere / qfile
+        if not eq.given and math.isfinite(ratio) and abs(ratio * 2 * math.pi - 1) < 0.05:
+            eq = read_geqdsk(path, None, e_bp=1)             # ψ is the total flux: COCOS 11-18
+            notes = list(eq.notes)
+            system = _system_of(eq, path, mu, name)
+            qhere = safety_factor(system, 0.5)
+            ratio = qhere / qfile
+        if not (math.isfinite(ratio) and abs(ratio - 1) < 0.05):
+            how = "as given (cocos = ...)" if eq.given else "as identified"
+            _fail(path, f"q at ψ_N = 0.5 is {qhere:.4g} from the field with COCOS {eq.cocos} {how} and {qfile:.4g} "
+                        f"in the file (ratio {ratio:.3g}; 2π or 1/2π means ψ's normalisation, COCOS 1-8 against "
+                        "11-18): give system.cocos, or check the file")
+        system.defaults["q_check"] = (qhere, qfile)
+        if not eq.given:
+            notes[0] += (f"; e_Bp = {eq.cocos // 10}: this field's |q(ψ_N = 0.5)| {qhere:.4g} matches the file's "
+                         f"{qfile:.4g} with ψ {'per radian' if eq.cocos < 10 else 'the total flux'}")
+    elif not eq.given:
+        notes[0] += "; e_Bp = 0 assumed (ψ per radian): the file has no q to check the 2π against"
+    system.defaults["cocos"] = eq.cocos
+    system.defaults["notes"] = tuple(notes)
+    return system
+
+
+def _system_of(eq, path, mu, name):
+    """The System of a read equilibrium (:func:`system_from_geqdsk` without the q check)."""
+    from .systems import System
+    _, sigma_bp, sigma_rphiz, _ = cocos_signs(eq.cocos)
     fields = fields_of(eq)
     (R, Z, phi, u), theta, H, domain, sym = _symbolic()
     Ra, Za = eq.axis
@@ -340,18 +425,9 @@ def system_from_geqdsk(path, mu=None, cocos: int = DEFAULT_COCOS, check_q=True, 
     u0 = v / math.sqrt(2)
     defaults = {"q0": [R03, Za, 0.0, u0], "h": _default_h(eq, R03, u0), "axis": (Ra, Za), "speed": v,
                 "equilibrium": str(path)}
-    system = System(name or f"equilibrium:{Path(path).stem}", [R, Z, phi, u], theta, H, params, symmetry=[0, 0, 1, 0],
-                    momentum_name="toroidal momentum", domain=domain, defaults=defaults, fields=fields,
-                    source=str(path))
-    if check_q and eq.q.size:
-        qfile = float(np.interp(0.5, np.linspace(0, 1, eq.q.size), np.abs(eq.q)))
-        qhere = safety_factor(system, 0.5)
-        if not (math.isfinite(qhere) and abs(qhere / qfile - 1) < 0.05):
-            _fail(path, f"q at ψ_N = 0.5 is {qhere:.4g} from the field as COCOS {cocos} reads it and {qfile:.4g} "
-                        f"in the file (ratio {qhere / qfile:.3g}; 2π or 1/2π means ψ's normalisation, COCOS 1-8 "
-                        "against 11-18): give system.cocos, or check the file")
-        system.defaults["q_check"] = (qhere, qfile)
-    return system
+    return System(name or f"equilibrium:{Path(path).stem}", [R, Z, phi, u], theta, H, params, symmetry=[0, 0, 1, 0],
+                  momentum_name="toroidal momentum", domain=domain, defaults=defaults, fields=fields,
+                  source=str(path))
 
 
 def _outboard(psi, eq, psi_n):
@@ -363,24 +439,35 @@ def _outboard(psi, eq, psi_n):
     return float(Rs[i])
 
 
-def _default_h(eq, R, u):
-    """A step of about 1/40 of the parallel transit time 2π q R/|u| at q = |q(0.5)| (1 without a q
-    profile), rounded to two significant digits."""
-    q = float(np.abs(eq.q[eq.q.size // 2])) if eq.q.size else 1.0
-    h = 2 * math.pi * q * R / abs(u) / 40
+H_PER_TRANSIT = 80          # default steps per poloidal transit of the default passing orbit
+
+
+def _default_h(eq, R, u, psi_n=0.3):
+    """A step of 1/H_PER_TRANSIT (1/80) of the default passing orbit's poloidal transit time
+    2π q R/|u|, its fastest time scale (a trapped orbit's bounce is slower, the drifts slower
+    still), with q the file's |q| where the orbit starts (ψ_N = ``psi_n``; 1 without a q profile),
+    rounded to two significant digits.  1/40 at q(0.5) broke points down within 3 steps in two of
+    five files from other codes (STEP's, at h = 140: docs/equilibria.md); 1/80 at the orbit's own q
+    ran all five clean."""
+    q = float(np.interp(psi_n, np.linspace(0, 1, eq.q.size), np.abs(eq.q))) if eq.q.size else 1.0
+    h = 2 * math.pi * q * R / abs(u) / H_PER_TRANSIT
     return float(f"{h:.2g}")
 
 
 def write_solovev(path, n=65, R0=2.0, B0=5.0, q0=2.0, kappa=1.6, a=0.5, cocos: int = DEFAULT_COCOS, nbdry=128,
-                  digits=17):
+                  digits=17, q=None, current=1, field=1, header_B0=None):
     """Write the Solov'ev equilibrium of ``guiding_centre_solovev`` (the same R0, B0, q0, κ) as a
     G-EQDSK file on an n × n grid: the box R ∈ [R0 − 1.3a, R0 + 1.3a], |Z| ≤ 1.3κa, the boundary the flux
     surface through (R0 + a, 0), F = B₀R₀ (constant), written in the signs of COCOS ``cocos`` so that
     :func:`system_from_geqdsk` with that COCOS gives the analytic system's field (and its gauge: the axis
-    is (R0, 0)).  q is written as zeros (not checked).  ``digits``: significant digits of every number
-    (G-EQDSK's own format has 9, which is the field's precision then; 17, the default, keeps every
-    double, in a wider format that :func:`read_geqdsk` recognises).  Used by the tests and
-    docs/equilibria.md."""
+    is (R0, 0)).  ``digits``: significant digits of every number (G-EQDSK's own format has 9, which is
+    the field's precision then; 17, the default, keeps every double, in a wider format that
+    :func:`read_geqdsk` recognises).  Used by the tests and docs/equilibria.md.
+
+    For the COCOS tests: ``current`` and ``field`` (±1) reverse the plasma current (ψ's rise, so
+    B_p) and the toroidal field (F, B₀) of the physical equilibrium; ``q`` (a number) writes a flat
+    q profile of that magnitude with the sign COCOS gives it, σ_Ip σ_B0 σ_ρθφ (None: zeros, not
+    checked); ``header_B0`` writes that B₀ in the header whatever F says (an inconsistent header)."""
     from freeqdsk import geqdsk
     e_bp, sigma_bp, sigma_rphiz, _ = cocos_signs(cocos)
     s = -sigma_rphiz
@@ -400,14 +487,16 @@ def write_solovev(path, n=65, R0=2.0, B0=5.0, q0=2.0, kappa=1.6, a=0.5, cocos: i
     for i, t in enumerate(theta):          # the boundary along rays from the axis
         ray = lambda r: psi_sol(R0 + r * np.cos(t), r * np.sin(t)) - psib
         rb[i] = brentq(ray, 1e-9, 2.5 * kappa * a)
-    sign_psi = sigma_bp * s * (2 * np.pi) ** e_bp
-    F = -s * B0 * R0
+    sign_psi = sigma_bp * s * (2 * np.pi) ** e_bp * current
+    F = -s * B0 * R0 * field
     psi_axis, psi_bdry = 0.0, sign_psi * psib
     ip = np.sign(psi_bdry - psi_axis) * sigma_bp * 1e6     # the current whose sign COCOS asks for
+    _, _, _, sigma_rtp = cocos_signs(cocos)
+    qpsi = np.zeros(n) if q is None else np.full(n, abs(q) * np.sign(ip) * np.sign(F) * sigma_rtp)
     data = dict(nx=n, ny=n, rdim=R[-1] - R[0], zdim=Z[-1] - Z[0], rcentr=R0, rleft=R[0], zmid=0.0, rmagx=R0,
-                zmagx=0.0, simagx=psi_axis, sibdry=psi_bdry, bcentr=F / R0, cpasma=ip, fpol=np.full(n, F),
-                pres=np.zeros(n), ffprime=np.zeros(n), pprime=np.zeros(n),
-                psi=sign_psi * psi_sol(R[:, None], Z[None, :]), qpsi=np.zeros(n),
+                zmagx=0.0, simagx=psi_axis, sibdry=psi_bdry, bcentr=F / R0 if header_B0 is None else header_B0,
+                cpasma=ip, fpol=np.full(n, F), pres=np.zeros(n), ffprime=np.zeros(n), pprime=np.zeros(n),
+                psi=sign_psi * psi_sol(R[:, None], Z[None, :]), qpsi=qpsi,
                 rbdry=R0 + rb * np.cos(theta), zbdry=rb * np.sin(theta),
                 rlim=np.array([R[0], R[-1], R[-1], R[0]]), zlim=np.array([Z[0], Z[0], Z[-1], Z[-1]]))
     with open(path, "w") as fh:

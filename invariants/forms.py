@@ -68,7 +68,8 @@ def _value(value, error, roundoff, tail):
     """The InvariantValue of a value with its error estimate, its round-off and its set's relative tail."""
     value = float(value)
     res = max(spectral.relative(error, value), tail)
-    return InvariantValue(value, res, res > UNDER_RESOLVED, float(error + roundoff), spectral.relative(roundoff, value))
+    return InvariantValue(value, float(res), bool(res > UNDER_RESOLVED), float(error + roundoff),
+                          float(spectral.relative(roundoff, value)))
 
 
 MIN_POINTS = 8           # the fewest points along a direction of a sample set
