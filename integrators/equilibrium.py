@@ -373,9 +373,10 @@ def system_from_geqdsk(path, mu=None, cocos: int | None = None, check_q=True, na
     Units are the file's (m, T) with charge/mass 1, so speeds set the orbits' width: a speed v has
     Larmor radius v/|B|.  The defaults are scaled to the plasma: the reference speed
     v = a|B_axis|/100 (a the boundary's half-width; a Larmor radius of 1 % of a), ``mu`` =
-    v²/(4|B_axis|) when not given, and ``defaults`` holds ``q0`` (on the outboard midplane at
-    ψ_N ≈ 0.3 with u = v/√2), ``h`` (:func:`_default_h`), ``axis``, ``speed`` (v) and
-    ``equilibrium`` (the path)."""
+    v²/(4|B_axis|) when not given, and ``defaults`` holds ``q0`` (a passing guiding centre on the
+    outboard midplane at ψ_N ≈ 0.3, u = max(v/√2, 1.5u_c) with u_c the trapped-passing boundary there,
+    ``u_boundary``), ``trapped`` (the same place, u = u_c/3), ``h`` (:func:`_default_h`), ``axis``,
+    ``speed`` (v) and ``equilibrium`` (the path)."""
     eq = read_geqdsk(path, cocos)
     system = _system_of(eq, path, mu, name)
     notes = list(eq.notes)
@@ -422,12 +423,20 @@ def _system_of(eq, path, mu, name):
         raise EquilibriumError(f"{eq.where()}: mu = {mu!r} is not finite")
     params = {sym[k]: v for k, v in values.items()}
     R03 = _outboard(fields[0], eq, 0.3)
-    u0 = v / math.sqrt(2)
-    defaults = {"q0": [R03, Za, 0.0, u0], "h": _default_h(eq, R03, u0), "axis": (Ra, Za), "speed": v,
-                "equilibrium": str(path)}
-    return System(name or f"equilibrium:{Path(path).stem}", [R, Z, phi, u], theta, H, params, symmetry=[0, 0, 1, 0],
-                  momentum_name="toroidal momentum", domain=domain, defaults=defaults, fields=fields,
-                  source=str(path))
+    system = System(name or f"equilibrium:{Path(path).stem}", [R, Z, phi, u], theta, H, params,
+                    symmetry=[0, 0, 1, 0], momentum_name="toroidal momentum", domain=domain, defaults={},
+                    fields=fields, source=str(path))
+    # the trapped-passing boundary where the orbits start: u_c² = 2μ(B_max − B), B_max on the inboard
+    # midplane of the same flux surface; the default orbits keep well away from it on either side
+    # (near it the orbits' periods differ strongly and shear any set out of resolution)
+    B = lambda RR: float(system.H(np.array([RR, Za, 0.0, 0.0]))) / values["mu"] if values["mu"] else 0.0
+    Bmax = B(_inboard(fields[0], eq, 0.3))
+    u_c = math.sqrt(max(2 * values["mu"] * (Bmax - B(R03)), 0.0))
+    u_pass = max(v / math.sqrt(2), 1.5 * u_c)
+    system.defaults.update({"q0": [R03, Za, 0.0, u_pass], "trapped": [R03, Za, 0.0, u_c / 3 if u_c else 0.15 * v],
+                            "h": _default_h(eq, R03, u_pass), "axis": (Ra, Za), "speed": v, "u_boundary": u_c,
+                            "equilibrium": str(path)})
+    return system
 
 
 def _outboard(psi, eq, psi_n):
@@ -440,6 +449,15 @@ def _outboard(psi, eq, psi_n):
 
 
 H_PER_TRANSIT = 80          # default steps per poloidal transit of the default passing orbit
+
+
+def _inboard(psi, eq, psi_n):
+    """R on the inboard midplane (Z of the axis) where ψ_N = psi_n."""
+    Ra, Za = eq.axis
+    Rs = np.linspace(Ra, eq.box[0], 400)
+    pn = psi(Rs, np.full_like(Rs, Za)) / eq.psi_span
+    i = int(np.argmax(pn >= psi_n)) if np.any(pn >= psi_n) else Rs.size - 1
+    return float(Rs[i])
 
 
 def _default_h(eq, R, u, psi_n=0.3):

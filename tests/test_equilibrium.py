@@ -451,3 +451,38 @@ def test_the_summary_names_the_file_and_a_changed_file_is_no_resume(tmp_path, ca
     assert cli_main(["run", str(scene), "-o", str(out), "--resume", "--steps", "40", "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "system" in err, err
+
+
+def test_the_default_orbits_are_well_passing_and_well_trapped(shipped):
+    """defaults["q0"] passes (u keeps its sign over one poloidal transit) and defaults["trapped"]
+    bounces (u changes sign), each away from the trapped-passing boundary u_c; h is 1/80 of the
+    passing orbit's transit at the file's q where it starts."""
+    d = shipped.defaults
+    uc = d["u_boundary"]
+    assert 0 < uc and d["q0"][3] >= 1.5 * uc and abs(d["trapped"][3] - uc / 3) < 1e-15
+    q = float(np.interp(0.3, np.linspace(0, 1, read_geqdsk(SHIPPED).q.size), np.abs(read_geqdsk(SHIPPED).q)))
+    assert float(f"{2 * math.pi * q * d['q0'][0] / d['q0'][3] / 80:.2g}") == d["h"]
+    for start, passes in ((d["q0"], True), (d["trapped"], False)):
+        sol = integrators.integrate(shipped, [start], "GLRK2", "symmetric", h=d["h"], steps=160, save_every=1)
+        u = sol.q[:, 0, 3]
+        assert not np.isfinite(sol.breakdown_time).any()
+        assert (np.all(u > 0) if passes else (u.min() < 0 < u.max())), (passes, u.min(), u.max())
+
+
+def test_a_scene_from_a_files_defaults_runs_ok(tmp_path):
+    """service.scene.equilibrium_scene writes a scene from the file's own defaults, with the COCOS
+    left to identification (the summary then says how it was identified); 30 steps of it run every
+    pair ok."""
+    from integrators.cli import main as cli_main
+    from integrators.service.scene import equilibrium_scene
+    import contextlib, io
+    shutil.copy(SHIPPED, tmp_path / "eq.geqdsk")
+    text = equilibrium_scene(tmp_path / "eq.geqdsk", steps=30, output=str(tmp_path / "eq.h5"))
+    assert "# cocos = 7" in text and "refine_to = 8192" in text
+    (tmp_path / "eq.toml").write_text(text)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert cli_main(["run", str(tmp_path / "eq.toml"), "-q"]) == 0
+    said = out.getvalue()
+    assert "read as COCOS 7 (identified from the file)" in said and "note: COCOS 7 identified from the file" in said
+    assert said.count(" ok ") >= 10, said

@@ -884,21 +884,22 @@ def equilibrium_scene(path, cocos=None, *, name=None, steps=1000, output=None) -
     """The TOML text of a scene built from a G-EQDSK file's own defaults (docs/equilibria.md), as
     the built-in ``freegs_dn`` is built from its file: the loop (2,048 points, refining to 8,192) a
     circle in (R, Z) of radius a/500 (a the boundary's half-width) around the passing guiding centre
-    ``defaults["q0"]``, the surface (24 × 24, refining to 47 × 47) a square of side a/250 around a
-    trapped one at the same place (u = 0.15 v), h = ``defaults["h"]``, GLRK1 and GLRK2 with every
+    ``defaults["q0"]``, the surface (24 × 24, refining to 47 × 47) a square of side a/250 around the
+    trapped one ``defaults["trapped"]`` at the same place, h = ``defaults["h"]``, GLRK1 and GLRK2 with every
     projection, every form.  Save it, edit it, run it: ``poincare run file.toml``."""
     from ..equilibrium import system_from_geqdsk
     sy = system_from_geqdsk(path, cocos=cocos)
     p = sy.param_values
     a = (p["R_max"] - p["R_min"]) / 2
     R0, Z0, _, u0 = sy.defaults["q0"]
-    v = sy.defaults["speed"]
+    ut = sy.defaults["trapped"][3]
     stem = Path(str(path)).name
     name = name or "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in Path(stem).stem) or "equilibrium"
 
     def vec(*x):
         return ", ".join(repr(float(c)) for c in x)
-    cocos_line = f"cocos = {sy.defaults['cocos']}" + ("" if cocos is not None else "            # identified from the file")
+    cocos_line = (f"cocos = {cocos}" if cocos is not None else
+                  f"# cocos = {sy.defaults['cocos']}          # identified from the file at each run: uncomment to fix it")
     return f'''# Guiding centres in {stem}, from the system's own defaults (integrators.service.scene.equilibrium_scene).
 # {'; '.join(sy.defaults['notes'])}
 name = "{name}"
@@ -919,7 +920,7 @@ shape = "rectangle"
 n_sigma = 24
 n_tau = 24
 refine_to = 2209
-params = {{ d = 4, center = [{vec(R0, Z0, 0.0, 0.15 * v)}], size = [{vec(a / 250, a / 250)}], plane = [0, 1] }}
+params = {{ d = 4, center = [{vec(R0, Z0, 0.0, ut)}], size = [{vec(a / 250, a / 250)}], plane = [0, 1] }}
 
 [run]
 tableaus = ["GLRK1", "GLRK2"]
