@@ -448,7 +448,7 @@ def _outboard(psi, eq, psi_n):
     return float(Rs[i])
 
 
-H_PER_TRANSIT = 80          # default steps per poloidal transit of the default passing orbit
+H_PER_TRANSIT = 320         # default steps per poloidal transit of the default passing orbit
 
 
 def _inboard(psi, eq, psi_n):
@@ -461,12 +461,14 @@ def _inboard(psi, eq, psi_n):
 
 
 def _default_h(eq, R, u, psi_n=0.3):
-    """A step of 1/H_PER_TRANSIT (1/80) of the default passing orbit's poloidal transit time
+    """A step of 1/H_PER_TRANSIT (1/320) of the default passing orbit's poloidal transit time
     2π q R/|u|, its fastest time scale (a trapped orbit's bounce is slower, the drifts slower
     still), with q the file's |q| where the orbit starts (ψ_N = ``psi_n``; 1 without a q profile),
-    rounded to two significant digits.  1/40 at q(0.5) broke points down within 3 steps in two of
-    five files from other codes (STEP's, at h = 140: docs/equilibria.md); 1/80 at the orbit's own q
-    ran all five clean."""
+    rounded to two significant digits: 1,000 steps are three transits.  1/40 at q(0.5) broke points
+    down within 3 steps in STEP's file (h = 140); at 1/80 its sample sets, even of a/5000, mixed out of
+    resolution by the fourth transit whatever their size (a spread of transit frequencies across
+    them, partly the method's phase error: a quarter of the step spread them a fifth as far).  With
+    1/320 the default scenes of the five files in docs/equilibria.md run ok."""
     q = float(np.interp(psi_n, np.linspace(0, 1, eq.q.size), np.abs(eq.q))) if eq.q.size else 1.0
     h = 2 * math.pi * q * R / abs(u) / H_PER_TRANSIT
     return float(f"{h:.2g}")

@@ -455,15 +455,15 @@ def test_the_summary_names_the_file_and_a_changed_file_is_no_resume(tmp_path, ca
 
 def test_the_default_orbits_are_well_passing_and_well_trapped(shipped):
     """defaults["q0"] passes (u keeps its sign over one poloidal transit) and defaults["trapped"]
-    bounces (u changes sign), each away from the trapped-passing boundary u_c; h is 1/80 of the
+    bounces (u changes sign), each away from the trapped-passing boundary u_c; h is 1/320 of the
     passing orbit's transit at the file's q where it starts."""
     d = shipped.defaults
     uc = d["u_boundary"]
     assert 0 < uc and d["q0"][3] >= 1.5 * uc and abs(d["trapped"][3] - uc / 3) < 1e-15
     q = float(np.interp(0.3, np.linspace(0, 1, read_geqdsk(SHIPPED).q.size), np.abs(read_geqdsk(SHIPPED).q)))
-    assert float(f"{2 * math.pi * q * d['q0'][0] / d['q0'][3] / 80:.2g}") == d["h"]
+    assert float(f"{2 * math.pi * q * d['q0'][0] / d['q0'][3] / 320:.2g}") == d["h"]
     for start, passes in ((d["q0"], True), (d["trapped"], False)):
-        sol = integrators.integrate(shipped, [start], "GLRK2", "symmetric", h=d["h"], steps=160, save_every=1)
+        sol = integrators.integrate(shipped, [start], "GLRK2", "symmetric", h=d["h"], steps=640, save_every=4)
         u = sol.q[:, 0, 3]
         assert not np.isfinite(sol.breakdown_time).any()
         assert (np.all(u > 0) if passes else (u.min() < 0 < u.max())), (passes, u.min(), u.max())
