@@ -46,6 +46,7 @@ def _on_signal(signum, frame):
     inside the user's code (a step map, a shape: stop.guarded), which may never return, it is
     raised at once."""
     exc = Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    exc.from_signal = True               # (stop.guarded tells it from a KeyboardInterrupt the code raised)
     if in_user_code():
         raise exc
     STOP.set(exc)

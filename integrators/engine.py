@@ -441,7 +441,12 @@ class MapEngine:
             q, p, lam = state.q[idx], state.p[idx], state.Lam[idx] / h
             try:
                 with np.errstate(all="ignore"):
-                    q1, p1, l1 = (np.asarray(x, dtype=np.float64) for x in self.step(q, p, lam, h, sy))
+                    got = tuple(np.asarray(x) for x in self.step(q, p, lam, h, sy))
+                    if len(got) != 3 or any(x.dtype.kind not in "fiub" for x in got):
+                        raise ValueError("returned " + (f"{len(got)} arrays" if len(got) != 3 else "values of types "
+                                         + ", ".join(str(x.dtype) for x in got)) + " (real q, p, lam are expected: "
+                                         "an imaginary part is not dropped)")
+                    q1, p1, l1 = (x.astype(np.float64) for x in got)
                 if q1.shape != q.shape or p1.shape != q.shape or l1.shape != q.shape:
                     raise ValueError(f"returned shapes {q1.shape}, {p1.shape}, {l1.shape} for {q.shape}")
             except Exception as exc:      # the user's map failed: its points stop here, the run goes on

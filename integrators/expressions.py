@@ -64,14 +64,20 @@ def parse_expression(text, where: str, names: dict | None = None):
         raise ExpressionError(f"{where}: expected a number or an expression string, got {type(text).__name__}")
     if len(text) > MAX_LENGTH:
         raise ExpressionError(f"{where}: expression longer than {MAX_LENGTH} characters")
+    src = text.strip().replace("^", "**")                                  # x^2 is a power, as in sympy
     try:
-        tree = ast.parse(text.strip().replace("^", "**"), mode="eval")     # x^2 is a power, as in sympy
-    except SyntaxError:
-        raise ExpressionError(f"{where}: cannot read '{text}' as an expression") from None
+        tree = ast.parse(src, mode="eval")
+    except SyntaxError as exc:
+        if "nested" in str(exc):             # Python's own limit on parentheses (200)
+            raise ExpressionError(f"{where}: the expression is nested more than {MAX_DEPTH} deep") from None
+        shown = text if len(text) <= 80 else text[:60] + f"… ({len(text)} characters)"
+        raise ExpressionError(f"{where}: cannot read '{shown}' as an expression") from None
     except (RecursionError, MemoryError):
         raise ExpressionError(f"{where}: the expression is nested more than {MAX_DEPTH} deep") from None
     try:
-        e = _Walker(where, text, names).visit(tree.body)
+        walker = _Walker(where, text, names)
+        walker.src = src
+        e = walker.visit(tree.body)
     except RecursionError:
         raise ExpressionError(f"{where}: the expression is nested more than {MAX_DEPTH} deep") from None
     for a in e.atoms(sympy.Number):          # 1e308*1e308 is one exact number: it must be a double
@@ -82,7 +88,10 @@ def parse_expression(text, where: str, names: dict | None = None):
             raise ExpressionError(f"{where}: '{text}' holds a number beyond the range of a double "
                                   f"(|x| > {1.7976931348623157e308:.4g})") from None
         except TypeError:
-            pass
+            continue
+        if a != 0 and abs(float(a)) < 2.2250738585072014e-308:    # 10^-420 would be 0 (or lose digits)
+            raise ExpressionError(f"{where}: '{text}' holds a number below the range of a double's normal "
+                                  f"numbers (0 < |x| < 2.225e-308): it would round to {float(a):g}") from None
     return e
 
 
@@ -151,6 +160,11 @@ class _Walker:
             if isinstance(v, float) and not math.isfinite(v):
                 raise ExpressionError(f"{self.where}: the number in '{self.text}' is too large for a double "
                                       "(it reads as infinity)")
+            if isinstance(v, float) and abs(v) < 2.2250738585072014e-308:    # 1e-420 reads as 0.0
+                literal = (ast.get_source_segment(getattr(self, "src", ""), node) or "").lower()
+                if any(c in "123456789" for c in literal.split("e")[0]):
+                    raise ExpressionError(f"{self.where}: the number {literal} in '{self.text}' is below the range "
+                                          f"of a double's normal numbers (0 < |x| < 2.225e-308): it reads as {v:g}")
             return sympy.Integer(v) if isinstance(v, int) else sympy.Rational(repr(v))
         if isinstance(node, ast.Name):
             if node.id in self.names:

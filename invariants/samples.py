@@ -28,7 +28,7 @@ def loop(shape="guiding_centre", n=2000, **params):
     """
     tau = loop_parameters(n)
     if callable(shape):
-        q = np.asarray(shape(tau, **params), dtype=float)
+        q = _real(shape(tau, **params), "loop")
         if q.ndim != 2 or q.shape[0] != len(tau):
             raise ValueError(f"loop function must return shape (n, d), got {q.shape}")
         return q
@@ -90,7 +90,7 @@ def surface(shape="guiding_centre", n_sigma=100, n_tau=100, **params):
     """
     S, T = surface_parameters(n_sigma, n_tau)
     if callable(shape):
-        q = np.asarray(shape(S, T, **params), dtype=float)
+        q = _real(shape(S, T, **params), "surface")
         if q.ndim != 3 or q.shape[:2] != S.shape:
             raise ValueError(f"surface function must return shape (n_sigma, n_tau, d), got {q.shape}")
         return q
@@ -113,6 +113,15 @@ def surface(shape="guiding_centre", n_sigma=100, n_tau=100, **params):
         q[..., j] += size[1] * (T - 0.5)
         return q
     raise ValueError(f"unknown surface shape '{shape}' (use 'guiding_centre', 'rectangle' or a callable)")
+
+
+def _real(values, what):
+    """A shape function's values as a float array: real numbers only (a complex value is refused,
+    not cut to its real part; strings and objects are refused as numpy refuses them)."""
+    a = np.asarray(values)
+    if a.dtype.kind == "c":
+        raise ValueError(f"{what} function returned complex values ({a.dtype}); return real coordinates")
+    return np.asarray(a, dtype=float)
 
 
 def _unknown(params, shape, allowed=()):

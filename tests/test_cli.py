@@ -432,3 +432,50 @@ def test_plots_are_written(tmp_path):
     assert names == sorted([f"p_I{k}_{f}.png" for k in (1, 2) for f in ("canonical", "corrected", "noncanonical")]
                            + ["p_diagnostics.png", "p_points.png"])
     assert all((tmp_path / "png" / n).stat().st_size > 10_000 for n in names)
+
+
+ODD_MAPS = '''import numpy as np
+
+def interrupts(q, p, lam, h, system):
+    raise KeyboardInterrupt
+
+def complex_map(q, p, lam, h, system):
+    return q + 0j, p + 1e-3j, lam
+
+def complex_shape(tau):
+    return np.stack([0.5 + 0.05 * np.cos(2 * np.pi * tau), 0.5 + 0.05j * np.sin(2 * np.pi * tau)], axis=1)
+'''
+
+
+def test_a_step_map_that_raises_keyboardinterrupt_or_returns_complex_values_fails_as_code(tmp_path):
+    """A KeyboardInterrupt raised by a step map itself is that map's failure, not 'interrupted by
+    SIGINT' (no signal was sent); complex values from a step map or a loop shape are refused, not cut
+    to their real part (issue 56)."""
+    (tmp_path / "maps.py").write_text(ODD_MAPS)
+    for name, say in (("interrupts", "raised KeyboardInterrupt itself (no signal was sent)"),
+                      ("complex_map", "values of types complex128")):
+        (tmp_path / "s.toml").write_text(STUCK.replace("maps.py:stuck", f"maps.py:{name}").replace("steps = 100", "steps = 10"))
+        r = poincare("run", "s.toml", "-o", f"{name}.h5", "-q", cwd=tmp_path)
+        assert r.returncode == 1 and "SIGINT" not in r.stderr + r.stdout, r.stderr
+        assert say in r.stderr and f"{name}-map" in r.stdout and "failed" in r.stdout, r.stderr
+    (tmp_path / "s.toml").write_text(USER.replace('shape = "ellipse"', 'shape = "maps.py:complex_shape"')
+                                     .replace("params = { d = 2, center = [0.5, 0.5], radii = [0.05, 0.05] }\n", ""))
+    r = poincare("run", "s.toml", "-o", "c.h5", "-q", cwd=tmp_path)
+    assert r.returncode == 2
+    one_line(r, "loop function returned complex values")
+
+
+def test_plain_errors_for_plain_mistakes(tmp_path):
+    """read_run(None), an output path of 123 and an unknown pair are one-line errors, not a raw
+    TypeError or a bare KeyError (issue 56)."""
+    from integrators import service
+    from integrators.service.reader import read_run
+    with pytest.raises(ValueError, match="read_run: a run file's path .* got NoneType None"):
+        read_run(None)
+    with pytest.raises(ValueError, match="output: a file path .* got int 123"):
+        service.run("point_vortices", 123)
+    out = tmp_path / "pv.h5"
+    (tmp_path / "s.toml").write_text(USER)
+    assert poincare("run", "s.toml", "-o", str(out), "-q", cwd=tmp_path).returncode == 0
+    with pytest.raises(KeyError, match=r"no pair 'GLRK9-none' in this run; its pairs: GLRK1-none"):
+        read_run(out).pairs["GLRK9-none"]

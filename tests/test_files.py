@@ -279,3 +279,76 @@ def test_an_unwritable_cache_is_named(tmp_path):
     r = poincare("run", "s.toml", "-o", "s.h5", "-q", cwd=tmp_path, env={"POINCARE_CACHE": str(tmp_path / "file/x")})
     assert r.returncode == 2 and not (tmp_path / "s.h5").exists()
     one_line(r, "$POINCARE_CACHE", str(tmp_path / "file/x"))
+
+
+def test_force_replaces_only_a_run_file_of_this_tool(tmp_path):
+    """--force over a text file, over an HDF5 file that is not a run file, or through a link the user
+    named to a text file: refused in one line, nothing changed; a dangling -o link is named as such;
+    a control character in -o is refused (issue 56)."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f["x"] = [1.0]
+    link = tmp_path / "link.h5"
+    link.symlink_to(notes)
+    for path, say in ((notes, "it is not an HDF5 file"), (tmp_path / "other.h5", "without a run file's 'format'"),
+                      (link, "(a symbolic link to")):
+        before = Path(path).read_bytes()
+        with pytest.raises(ValueError, match=r"is not a run file of this tool|a symbolic link to") as e:
+            driver.run(scene(20), path, force=True, progress=False)
+        assert say in str(e.value) and "is not a run file of this tool" in str(e.value), str(e.value)
+        assert Path(path).read_bytes() == before
+    dangling = tmp_path / "dangling.h5"
+    dangling.symlink_to(tmp_path / "nowhere.h5")
+    with pytest.raises(ValueError, match=r"is a symbolic link to '.*nowhere.h5', which does not exist"):
+        driver.run(scene(20), dangling, progress=False)
+    assert not (tmp_path / "nowhere.h5").exists()
+    with pytest.raises(ValueError, match="holds control characters"):
+        driver.run(scene(20), tmp_path / "a\nb.h5", progress=False)
+    ours = tmp_path / "ours.h5"
+    driver.run(scene(20), ours, progress=False)
+    driver.run(scene(30), ours, force=True, progress=False)          # a run file of this tool: replaced
+    with h5py.File(ours) as f:
+        assert int(f.attrs["steps"]) == 30
+
+
+def test_a_resume_with_nothing_to_do_changes_no_byte_and_damage_is_refused(tmp_path):
+    """A finished run resumed: the file is byte for byte what it was; a damaged file (a flipped byte
+    in its superblock's area that read_run reports) is refused by --resume as by read_run (issue 56)."""
+    out = tmp_path / "lv.h5"
+    driver.run(scene(20), out, progress=False)
+    before = out.read_bytes()
+    summaries = driver.run(scene(20), out, resume=True, progress=False)
+    assert out.read_bytes() == before and all(s.status == "ok" for s in summaries)
+    from integrators.service.reader import read_run
+    damaged = tmp_path / "damaged.h5"
+    _flip_chunk(out, "runs/GLRK2-symmetric/I1/canonical")
+    with pytest.raises(ValueError):
+        read_run(out)
+    damaged_bytes = out.read_bytes()
+    with pytest.raises(ValueError, match=r"cannot resume: .*--force replaces it"):
+        driver.run(scene(20), out, resume=True, progress=False)
+    assert out.read_bytes() == damaged_bytes
+
+
+def test_a_scene_name_is_no_path_and_plots_are_not_written_through_links(tmp_path):
+    """name = "../escape" with no [output] writes _escape.h5 here, not escape.h5 in the parent;
+    `poincare plot` replaces a symbolic link in the figure folder instead of writing into its
+    target (issue 56)."""
+    work = tmp_path / "work"
+    work.mkdir()
+    text = LV.replace('name = "lv"', 'name = "../escape"')
+    assert text != LV
+    (work / "s.toml").write_text(text.replace("steps = 20", "steps = 10"))
+    r = poincare("run", "s.toml", "-q", cwd=work)
+    assert r.returncode == 0, r.stderr
+    assert (work / "_escape.h5").is_file() and not (tmp_path / "escape.h5").exists()
+    figs = work / "figs"
+    figs.mkdir()
+    secret = work / "secret.txt"
+    secret.write_text("keep me\n")
+    (figs / "_escape_diagnostics.png").symlink_to(secret)
+    r = poincare("plot", "_escape.h5", "-o", "figs", cwd=work)
+    assert r.returncode == 0, r.stderr
+    assert secret.read_text() == "keep me\n" and not (figs / "_escape_diagnostics.png").is_symlink()
+    assert (figs / "_escape_diagnostics.png").stat().st_size > 1000

@@ -3,6 +3,7 @@ before any file is written, and code a scene names runs only from its folder (in
 expressions.py, tableaus.py, plugins.py)."""
 import os
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -517,3 +518,33 @@ def test_the_jacobian_refresh_reaches_newton_and_is_part_of_the_scene(tmp_path):
     for bad in ("0.0", "1.0", "-0.1", "1e400", '"often"'):
         with pytest.raises(SceneError, match=r"run\.jacobian_refresh'? must be"):
             parse_scene(text.replace("[run]\n", f"[run]\njacobian_refresh = {bad}\n"))
+
+
+def test_numbers_a_double_cannot_hold_nesting_and_stage_matrices_are_judged_fairly(tmp_path):
+    """H = "1e-420*x^2" (a literal that reads as 0) is refused as 1e999 is; 999 nested parentheses
+    say 'nested more than 100 deep' without echoing the expression; a 50-stage a = I/100 (det 1e-100,
+    condition 1) is not called singular, Lobatto IIIA's a still is; a FIFO named as a scene's data
+    file is 'not a regular file' (issue 56)."""
+    from integrators.expressions import ExpressionError, parse_expression
+    from integrators.tableaus import tableau_from_file
+    x = sympy.Symbol("x")
+    with pytest.raises(ExpressionError, match=r"the number 1e-420 .* below the range of a double"):
+        parse_expression("1e-420*x^2", "system.H", {"x": x})
+    deep = "(" * 999 + "x" + ")" * 999
+    with pytest.raises(ExpressionError) as e:
+        parse_expression(deep, "system.H", {"x": x})
+    assert str(e.value) == "system.H: the expression is nested more than 100 deep"
+    assert parse_expression("1e-300*x", "system.H", {"x": x}) != 0
+    s = 50
+    rows = "\n".join("  [" + ", ".join("0.01" if i == j else "0" for j in range(s)) + "]," for i in range(s))
+    (tmp_path / "diag.toml").write_text(f'name = "diag"\nb = [{", ".join(["0.02"] * s)}]\n'
+                                        f'c = [{", ".join(["0.01"] * s)}]\na = [\n{rows}\n]\n')
+    assert tableau_from_file(tmp_path / "diag.toml").name == "diag"
+    (tmp_path / "lob.toml").write_text('b = [0.5, 0.5]\nc = [0, 1]\na = [[0, 0], [0.5, 0.5]]\n')
+    with pytest.raises(ValueError, match="a is singular"):
+        tableau_from_file(tmp_path / "lob.toml")
+    os.mkfifo(tmp_path / "pipe.toml")
+    text = (Path(integrators.__file__).parent / "service" / "scenes" / "point_vortices.toml").read_text().replace('tableaus = ["GLRK2", "SRK3"]',
+                                                                     'tableaus = ["pipe.toml"]')
+    with pytest.raises(SceneError, match=r"'pipe.toml' is not a regular file"):
+        parse_scene(text, str(tmp_path / "s.toml"))

@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
 from pathlib import Path
 
 from .scene import RUN_KEYS, SceneError, parse_scene, scene_source
@@ -79,6 +80,8 @@ def run(scene="default", output=None, *, resume=False, force=False, threads=None
     progress : True/False for the progress bar (default: shown in a terminal or a notebook)
     overrides : keys of the scene's [run] table, e.g. ``steps=2000``, ``h=5.0``
     """
+    if output is not None and not isinstance(output, (str, os.PathLike)):
+        raise ValueError(f"output: a file path (str or Path) is needed, got {type(output).__name__} {output!r}")
     from ..engine import max_threads
     from .driver import run as run_driver
     from .reader import read_run

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import secrets
+import os
 import shutil
 import sys
 import time
@@ -98,6 +99,11 @@ def _check_output(path, resume, force):
     """One-line reasons why ``path`` cannot be the output, or None."""
     if resume and force:
         return "--resume and --force contradict each other: --resume continues the file, --force replaces it"
+    if not str(path).isprintable():
+        return f"output {str(path)!r} holds control characters (a newline or a terminal escape); give a plain name"
+    if path.is_symlink() and not path.exists():
+        return (f"output '{path}' is a symbolic link to '{os.readlink(path)}', which does not exist; remove the link "
+                "or give another -o")
     if path.is_dir():
         return f"output '{path}' is a directory; give a file name, e.g. -o {path / 'run.h5'}"
     parent = path.parent if str(path.parent) else Path(".")
@@ -109,7 +115,20 @@ def _check_output(path, resume, force):
         return f"output '{path}' exists; use --resume to continue it or --force to overwrite it"
     if resume and not path.exists():
         return f"cannot resume: '{path}' does not exist"
+    if resume:                           # the damage check plot and read_run apply: never rewrite damage
+        from .reader import read_run
+        try:
+            read_run(path)
+        except files.BusyFile as exc:
+            return str(exc)
+        except (ValueError, OSError) as exc:
+            return f"cannot resume: {exc}; --force replaces it"
     if force and path.exists():          # never replace a file another run is still writing
+        why = files.not_ours(path)
+        if why:
+            return (f"output '{path}'{' (a symbolic link to ' + repr(str(path.resolve())) + ')' if path.is_symlink() else ''}"
+                    f" is not a run file of this tool ({why}): --force replaces only those; give another -o or "
+                    "move it away")
         try:
             files.open_file(path).close()
         except files.BusyFile as exc:
@@ -117,6 +136,15 @@ def _check_output(path, resume, force):
         except (ValueError, OSError):    # damaged or not HDF5: --force is for that
             pass
     return None
+
+
+def _nothing_left(path, scene) -> bool:
+    """Whether every pair of ``scene`` is finished in the file ``path`` (a resume with nothing to do)."""
+    from .output import FINISHED
+    with files.open_file(path) as f:
+        runs = f["runs"] if "runs" in f else {}
+        return all(p.name in runs and str(runs[p.name].attrs.get("status", "pending")) in FINISHED
+                   for p in scene.pairs)
 
 
 def _trial_output(scene, system, q0):
@@ -313,6 +341,8 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                         raise files.OutputError(f"cannot extend '{path}': its working copy cannot be written "
                                                  f"({files.plain_error(exc)}); the file is as it was") from None
                     f = resumable.reopen(replacing.new, scene)
+                elif resume and _nothing_left(path, scene):
+                    f = files.open_file(path, "r")     # every pair finished: read, never rewrite (byte for byte)
                 elif resume:
                     f = resumable.reopen(path, scene)
                 else:
@@ -322,15 +352,18 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                         target = replacing.new
                     f = output.create(target, scene, version, n,
                                       State.schema(n, system.d, scene.max_stages, scene.precision), UNDER_RESOLVED)
-                if "energy" in scene.diagnostics:       # where a relative energy error has no scale
-                    from .diagnostics import _scalars
-                    output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
-                for pair in scene.pairs:
-                    todo.append(resumable.restart_pair(f, pair.name, scene.output_every,
-                                                    finished_too=grown_from is not None))
-                f.flush()
-                if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
-                    checkpoints.prune_slabs(f, path, token)
+                if f.mode == "r":
+                    todo = [None] * len(scene.pairs)
+                else:
+                    if "energy" in scene.diagnostics:       # where a relative energy error has no scale
+                        from .diagnostics import _scalars
+                        output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
+                    for pair in scene.pairs:
+                        todo.append(resumable.restart_pair(f, pair.name, scene.output_every,
+                                                        finished_too=grown_from is not None))
+                    f.flush()
+                    if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
+                        checkpoints.prune_slabs(f, path, token)
             except (OSError, ValueError) as exc:
                 todo = exc if isinstance(exc, (ValueError, files.OutputError)) else \
                     files.OutputError(f"cannot write output '{path}': {files.plain_error(exc)}")
@@ -409,10 +442,11 @@ def _finish(path, scene, opened, timings) -> list:
     """Rank 0: close the file (replacing the old one if it has not been yet: a scene with no pair to
     run writes no rows), read the summaries back, attach the pairs' clocks."""
     with critical():
+        write = opened.f.mode != "r"          # (read only: a resume with nothing left to do)
         opened.f.close()
         if opened.replacing is not None:
             opened.replacing.commit()
-        summaries = finalize(path, scene)
+        summaries = finalize(path, scene, write)
     for s_ in summaries:
         s_.timings = timings.get(s_.pair, {})
     return summaries
@@ -735,9 +769,9 @@ class _Stream:
         self.transport.finish()
 
 
-def finalize(path, scene):
-    """Each pair's status and wall_time attributes, written, and the summaries."""
+def finalize(path, scene, write=True):
+    """Each pair's status and wall_time attributes, written (unless ``write`` is False), and the summaries."""
     return [PairSummary(name, status, broke, errs, wall, unresolved_from=unresolved, breakdown=breakdown,
                         laws={k: v.law for k, v in laws.items()}, refined=refined)
             for name, status, broke, errs, wall, unresolved, breakdown, laws, refined in
-            statuses.finish(path, [p.name for p in scene.pairs], scene.n_outputs)]
+            statuses.finish(path, [p.name for p in scene.pairs], scene.n_outputs, write)]

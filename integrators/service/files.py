@@ -119,3 +119,27 @@ def _read(g, name, limit=None):
     except (OSError, KeyError, ValueError, RuntimeError, MemoryError) as exc:
         raise DamagedFile(f"'{g.file.filename}' is damaged: cannot read {g.name}/{name} "
                           f"({plain_error(exc)})") from None
+
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def not_ours(path):
+    """Why the existing ``path`` is not a run file of this tool (so --force may not replace it), or
+    None.  A file that is HDF5 by its signature but cannot be opened (damaged: what --force is for)
+    or is locked counts as ours; an HDF5 file that opens is ours when it carries the run file's
+    ``format`` attribute (service/output.py)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError as exc:
+        return f"it cannot be read ({plain_error(exc)})"
+    if head != HDF5_SIGNATURE:
+        return "it is not an HDF5 file"
+    try:
+        with h5py.File(path, "r") as f:
+            if "format" not in f.attrs:
+                return "it is an HDF5 file without a run file's 'format' attribute"
+    except OSError:
+        return None
+    return None

@@ -87,7 +87,7 @@ def _grid(run, inv, form, out):
                  "maxima, from where it holds)" + _caption(shaded, shaded_broke),
                  fontsize=10)
     fig.tight_layout()
-    fig.savefig(out, dpi=90)
+    _save(fig, out)
     plt.close(fig)
 
 
@@ -138,7 +138,7 @@ def _diagnostics(run, out):
         if ax.get_legend_handles_labels()[0]:      # (none before any pair wrote a row)
             ax.legend(fontsize=5.5, ncol=2, loc="lower right")
     fig.tight_layout()
-    fig.savefig(out, dpi=90)
+    _save(fig, out)
     plt.close(fig)
     return True
 
@@ -166,9 +166,27 @@ def _points(run, out):
     ax.legend(fontsize=7)
     ax.set_title(f"advected sample points ({names[0]})", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out, dpi=90)
+    _save(fig, out)
     plt.close(fig)
     return True
+
+
+def _save(fig, out):
+    """fig as the PNG ``out``, written beside it and renamed over it: a symbolic link (or anything)
+    at ``out`` is replaced as an entry of the folder, never written through."""
+    import tempfile
+    out = Path(out)
+    fd, tmp = tempfile.mkstemp(prefix=".plot-", suffix=".png", dir=out.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    try:
+        os.chmod(tmp, 0o666 & ~umask)          # a plain file's mode, not mkstemp's 0600
+        fig.savefig(tmp, dpi=90)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def plot_file(path, outdir=None):
@@ -228,6 +246,6 @@ def _refinement(run, out):
     fig.suptitle("sample sets that refine themselves: the coarsest nested level that resolves the invariant",
                  fontsize=10)
     fig.tight_layout()
-    fig.savefig(out, dpi=90)
+    _save(fig, out)
     plt.close(fig)
     return True

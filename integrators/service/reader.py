@@ -225,19 +225,28 @@ def _growth_attrs(g):
     return out
 
 
+class Pairs(dict):
+    """{pair name: PairRun}; an unknown name is a KeyError that lists the pairs there are."""
+
+    def __missing__(self, key):
+        raise KeyError(f"no pair {key!r} in this run; its pairs: {', '.join(self) or 'none'}")
+
+
 def read_run(path) -> Run:
     """Read a ``poincare run`` file into arrays (the layout above; h5py underneath).
 
     A damaged dataset (failed checksum) or a file that is not a run file is one :class:`DamagedFile`
     naming it.  Pairs still ``pending`` are read as far as they got.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"read_run: a run file's path (str or Path) is needed, got {type(path).__name__} {path!r}")
     limit = size_limit(path) if os.path.exists(path) else 0
     try:
         with open_file(path) as f:
             fmt = f.attrs.get("format")
             if fmt not in (FORMAT, "poincare/1"):
                 raise DamagedFile(f"'{path}' is not a poincare run file")
-            pairs = {}
+            pairs = Pairs()
             for name, g in f["runs"].items():
                 def sets(key):
                     return {k: _read(g, f"{key}/{k}", limit) for k in g[key]} if key in g else {}

@@ -514,7 +514,10 @@ def _data_file(e, base, what):
     to the scene, then in the current directory; a one-line error, "``what`` 'e' not found", if none exists."""
     p = Path(e)
     cands = [p] if p.is_absolute() else [*([Path(base) / p] if base else []), Path.cwd() / p]
+    odd = next((c for c in cands if c.exists() and not c.is_file()), None)
     found = next((c for c in cands if c.is_file()), None)
+    if found is None and odd is not None:              # a FIFO (read for ever), a directory, a device
+        raise SceneError(f"{what} '{e}' is not a regular file ({odd})")
     if found is None:
         raise SceneError(f"{what} '{e}' not found (looked in {', '.join(str(c.parent) for c in cands)})")
     return found
@@ -588,7 +591,7 @@ def _steps_of(run):
 
 def _output_of(out, name):
     """[output]: (path, checkpoint_seconds, checkpoints)."""
-    path = out.get("path", f"{name}.h5")
+    path = out.get("path", f"{safe_name(name)}.h5")
     ck_seconds = float(out.get("checkpoint_seconds", CHECKPOINT_SECONDS))
     if not (math.isfinite(ck_seconds) and ck_seconds >= 0):
         raise SceneError(f"output.checkpoint_seconds must be a finite number ≥ 0, got {ck_seconds!r}")
@@ -596,6 +599,13 @@ def _output_of(out, name):
     if ck_mode not in ("in-file", "per-rank"):
         raise SceneError(f"output.checkpoints must be \"in-file\" or \"per-rank\", got {ck_mode!r}")
     return path, ck_seconds, ck_mode
+
+
+def safe_name(name: str) -> str:
+    """A scene name as a file name (the default output, name.h5): letters, digits, '-', '_' and '.'
+    kept, anything else (a '/', a '..' path, a control character) as '_', no leading dot."""
+    import re
+    return re.sub(r"[^A-Za-z0-9._-]", "_", str(name)).lstrip(".") or "scene"
 
 
 def step_map_label(spec):
@@ -883,8 +893,8 @@ def scene_source(spec: str | None) -> tuple:
 def equilibrium_scene(path, cocos=None, *, name=None, steps=1000, output=None) -> str:
     """The TOML text of a scene built from a G-EQDSK file's own defaults (docs/equilibria.md), as
     the built-in ``freegs_dn`` is built from its file: the loop (2,048 points, refining to 8,192) a
-    circle in (R, Z) of radius a/500 (a the boundary's half-width) around the passing guiding centre
-    ``defaults["q0"]``, the surface (24 × 24, refining to 47 × 47) a square of side a/250 around the
+    circle in (R, Z) of radius a/5000 (a the boundary's half-width) around the passing guiding centre
+    ``defaults["q0"]``, the surface (24 × 24, refining to 47 × 47) a square of side a/2500 around the
     trapped one ``defaults["trapped"]`` at the same place, h = ``defaults["h"]``, GLRK1 and GLRK2 with every
     projection, every form.  Save it, edit it, run it: ``poincare run file.toml``."""
     from ..equilibrium import system_from_geqdsk
@@ -913,14 +923,14 @@ params = {{ mu = {p['mu']:.17g} }}
 shape = "ellipse"
 points = 2048
 refine_to = 8192
-params = {{ d = 4, center = [{vec(R0, Z0, 0.0, u0)}], radii = [{vec(a / 500, a / 500)}], plane = [0, 1] }}
+params = {{ d = 4, center = [{vec(R0, Z0, 0.0, u0)}], radii = [{vec(a / 5000, a / 5000)}], plane = [0, 1] }}
 
 [surface]
 shape = "rectangle"
 n_sigma = 24
 n_tau = 24
 refine_to = 2209
-params = {{ d = 4, center = [{vec(R0, Z0, 0.0, ut)}], size = [{vec(a / 250, a / 250)}], plane = [0, 1] }}
+params = {{ d = 4, center = [{vec(R0, Z0, 0.0, ut)}], size = [{vec(a / 2500, a / 2500)}], plane = [0, 1] }}
 
 [run]
 tableaus = ["GLRK1", "GLRK2"]

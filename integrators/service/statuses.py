@@ -109,22 +109,24 @@ def close_pair(g, n_outputs, threshold, folder=None):
         settle_checkpoint(g, folder)
 
 
-def finish(path, names, n_outputs) -> list:
+def finish(path, names, n_outputs, write=True) -> list:
     """Write each pair's final status, wall_time and growth laws; [(name, status, breakdowns, errors,
     wall time, unresolved, (first breakdown time or None, points), laws, refined)] as :func:`pair_summary`,
-    :func:`growth_laws` and :func:`refined` give them."""
+    :func:`growth_laws` and :func:`refined` give them.  ``write=False`` (a resume with nothing left to
+    do) reads them and writes nothing: the file stays byte for byte."""
     out = []
-    with h5py.File(path, "r+") as f:
+    with h5py.File(path, "r+" if write else "r") as f:
         threshold = float(f.attrs.get("resolution_threshold", np.inf))
         for name in names:
             g = f["runs"][name]
             status, broke, errs, unresolved = pair_summary(g, n_outputs, threshold)
-            set_status(g, status, unresolved)
             laws = growth_laws(g, threshold)
-            if status in FINISHED:
-                write_laws(g, laws)
             wall = float(g["wall_clock"][0])
-            g.attrs["wall_time"] = wall
+            if write:
+                set_status(g, status, unresolved)
+                if status in FINISHED:
+                    write_laws(g, laws)
+                g.attrs["wall_time"] = wall
             bt = g["breakdown_time"][...]
             first = float(bt[np.isfinite(bt)].min()) if broke else None
             out.append((name, status, broke, errs, wall, unresolved, (first, int(bt.size)), laws, refined(g)))

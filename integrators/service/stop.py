@@ -67,6 +67,10 @@ def guarded(fn, label):
             return fn(*args, **kwargs)
         except SystemExit as exc:
             raise UserCodeExit(f"{label} called sys.exit({exc.code!r})") from None
+        except KeyboardInterrupt as exc:
+            if getattr(exc, "from_signal", False):      # SIGINT/SIGTERM raised into it: a real stop
+                raise
+            raise UserCodeExit(f"{label} raised KeyboardInterrupt itself (no signal was sent)") from None
         finally:
             _user.depth -= 1
     call.__wrapped_user_code__ = fn
