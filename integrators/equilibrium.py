@@ -175,24 +175,9 @@ def read_geqdsk(path, cocos: int | None = None, e_bp: int | None = None) -> Equi
     q = np.asarray(g.qpsi, dtype=float) if g.qpsi is not None else np.zeros(0)
     if not np.any(q) or not np.all(np.isfinite(q)):
         q = np.zeros(0)                  # a file without q (all zeros): nothing to check it against
-    if cocos is None:
-        if g.cpasma == 0.0:
-            _fail(path, "I_p = 0 in the header: the COCOS cannot be identified without the current's sign; "
-                        "give system.cocos (cocos=...)")
-        base, why = identify_cocos(dpsi, float(g.cpasma), field, q)
-        cocos = base + 10 * int(e_bp or 0)
-        notes.insert(0, f"COCOS {cocos} identified from the file: " + "; ".join(why))
-        given = False
-    else:
-        given = True
-        if g.cpasma != 0.0:
-            base, why = identify_cocos(dpsi, float(g.cpasma), field, q)
-            _, sb_given, _, _ = cocos_signs(cocos)
-            _, sb_file, _, _ = cocos_signs(base)
-            if sb_given != sb_file:
-                notes.insert(0, f"cocos = {cocos} was given and is used, though the file's own signs say COCOS "
-                                f"{base} or {base + 10} ({why[0]}): the poloidal field is the reverse of what the "
-                                "file's current implies")
+    cocos, first = _conventions(path, cocos, e_bp, dpsi, float(g.cpasma), field, q)
+    given = not first.startswith("COCOS")
+    notes = ([first] if first else []) + notes
     e, sigma_bp, _, _ = cocos_signs(cocos)
     scale = (2 * math.pi) ** e
     box = (float(R[0]), float(R[-1]), float(Z[0]), float(Z[-1]))
@@ -203,6 +188,24 @@ def read_geqdsk(path, cocos: int | None = None, e_bp: int | None = None) -> Equi
     return Equilibrium(path=path, cocos=cocos, R=R, Z=Z, psi=(psi - g.simagx) / scale, psi_span=dpsi / scale,
                        F=fpol, axis=(float(g.rmagx), float(g.zmagx)), box=box, q=q, current=float(g.cpasma),
                        B0=float(g.bcentr), R0=float(g.rcentr), notes=tuple(notes), given=given)
+
+
+def _conventions(path, cocos, e_bp, dpsi, current, field, q):
+    """(the COCOS to use, the note that says why: '' where a given index agrees with the file)."""
+    if cocos is None:
+        if current == 0.0:
+            _fail(path, "I_p = 0 in the header: the COCOS cannot be identified without the current's sign; "
+                        "give system.cocos (cocos=...)")
+        base, why = identify_cocos(dpsi, current, field, q)
+        cocos = base + 10 * int(e_bp or 0)
+        return cocos, f"COCOS {cocos} identified from the file: " + "; ".join(why)
+    if current == 0.0:
+        return cocos, ""
+    base, why = identify_cocos(dpsi, current, field, q)
+    if cocos_signs(cocos)[1] != cocos_signs(base)[1]:
+        return cocos, (f"cocos = {cocos} was given and is used, though the file's own signs say COCOS {base} or "
+                       f"{base + 10} ({why[0]}): the poloidal field is the reverse of what the file's current implies")
+    return cocos, ""
 
 
 def _data_format(path):
