@@ -2,7 +2,7 @@
 
 * ``<stem>_I1_<form>.png``, ``<stem>_I2_<form>.png``: the paper's figure grid — rows are
   projections, columns are tableaus — of the relative invariant error |I(t) − I(0)|/|I(0)|
-  against time, log scale (errors span decades; exact zeros are drawn at 1e-17).  Outputs at
+  against time, log scale (errors span decades; exact zeros, as at t = 0, are not drawn).  Outputs at
   which the set was under-resolved are shaded grey, outputs from its first broken-down point on
   red; a pair that is not ``ok`` is labelled with its status.  A damaged file (failed checksum, missing datasets) is one error line.
 * ``<stem>_diagnostics.png``: energy, momentum and constraint errors, one panel each, every pair.
@@ -58,7 +58,11 @@ def _grid(run, inv, form, out):
             pr = run.pairs.get(pair_name(t, p))
             values = None if pr is None else (pr.I1 if inv == "I1" else pr.I2).get(form)
             if values is not None:
-                ax.semilogy(pr.t, np.maximum(relative_error(values), FLOOR), lw=0.9)
+                rel = np.asarray(relative_error(values), dtype=float)
+                ax.semilogy(pr.t, np.where(rel > 0, rel, np.nan), lw=0.9, ms=3,   # zeros (t = 0) not drawn
+                            marker="." if np.count_nonzero(rel > 0) < 30 else None)
+                if rel.size > 1 and not np.any(rel[1:] > 0) and np.all(np.isfinite(rel)):
+                    ax.text(0.5, 0.5, "0 at every output", transform=ax.transAxes, fontsize=7, ha="center")
                 _law_line(ax, pr, f"{inv} {form}")
                 broke = ~np.isfinite(values)        # red from the set's first broken point on (no invariant)
                 for a, b in _stretches(pr.t, broke):
@@ -82,6 +86,7 @@ def _grid(run, inv, form, out):
                 ax.set_xlabel("t", fontsize=8)
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylim(FLOOR / 2, None)
+    _time_axis(axes[0, 0], run)
     fig.suptitle(f"{'first' if inv == 'I1' else 'second'} Poincaré invariant {inv}, {form} form: "
                  f"|{inv}(t) − {inv}(0)| / |{inv}(0)|\n(dashed: the fitted growth law C·t^α of its window "
                  "maxima, from where it holds)" + _caption(shaded, shaded_broke),
@@ -89,6 +94,15 @@ def _grid(run, inv, form, out):
     fig.tight_layout()
     _save(fig, out)
     plt.close(fig)
+
+
+def _time_axis(ax, run):
+    """The run's time span on ``ax`` (not only the drawn points': zeros are not drawn)."""
+    ts = [pr.t for pr in run.pairs.values() if pr.t.size]
+    if ts:
+        lo, hi = min(float(t.min()) for t in ts), max(float(t.max()) for t in ts)
+        if hi > lo:
+            ax.set_xlim(lo - 0.03 * (hi - lo), hi + 0.03 * (hi - lo))
 
 
 def _law_line(ax, pr, key, colour="k"):
@@ -119,24 +133,39 @@ def _absolute_energy(run) -> bool:
         return False
 
 
+DIAGNOSTIC_AXES = {"energy": "max |H − H₀|/|H₀|  (relative)", "momentum": "max |P − P₀|  (absolute)",
+                   "constraint": "max |p − ϑ(q)|  (absolute)"}
+
+
 def _diagnostics(run, out):
+    """Energy, momentum and constraint errors, one panel each, every pair: each axis says what it
+    measures, values of exactly 0 (t = 0) are not drawn (no floor that reads as data), and each
+    panel's legend (the pairs with that error's growth law) sits below it, off the curves."""
     diags = [d for d in ("energy", "momentum", "constraint") if any(d in pr.errors for pr in run.pairs.values())]
     if not diags:
         return False
-    fig, axes = plt.subplots(1, len(diags), figsize=(5 * len(diags), 3.6), squeeze=False)
+    n = len(run.pairs)
+    rows = (n + 1) // 2
+    fig, axes = plt.subplots(1, len(diags), figsize=(5 * len(diags), 3.4 + 0.16 * rows), squeeze=False)
     for ax, d in zip(axes[0], diags):
         for k, (name, pr) in enumerate(run.pairs.items()):
             if d in pr.errors and pr.errors[d].shape[0]:
                 law = pr.growth.get(d, ("",))[0]
-                ax.semilogy(pr.t, np.maximum(pr.errors[d], FLOOR), lw=0.8, label=f"{name}: {law}" if law else name,
-                            ls=("-", "--", ":", "-.")[k // 10 % 4])
-        ax.set_title(f"{d} error" + ((" (relative; absolute at the points where H0 = 0)" if _absolute_energy(run)
-                                      else " (relative)") if d == "energy" else ""), fontsize=10)
+                e = np.asarray(pr.errors[d], dtype=float)
+                ax.semilogy(pr.t, np.where(e > 0, e, np.nan), lw=0.8, label=f"{name}: {law}" if law else name,
+                            ls=("-", "--", ":", "-.")[k // 10 % 4], ms=3,
+                            marker="." if np.count_nonzero(e > 0) < 30 else None)   # (a few outputs: points)
+        label = DIAGNOSTIC_AXES[d]
+        if d == "energy" and _absolute_energy(run):
+            label += "; absolute where H₀ = 0"
+        ax.set_ylabel(label, fontsize=8)
+        ax.set_title(f"{d} error", fontsize=10)
+        _time_axis(ax, run)
         ax.set_xlabel("t")
         ax.grid(True, lw=0.3)
-    for ax in axes[0]:                      # each panel's own legend: the pairs with that error's growth law
+    for ax in axes[0]:                      # each panel's own legend, below it
         if ax.get_legend_handles_labels()[0]:      # (none before any pair wrote a row)
-            ax.legend(fontsize=5.5, ncol=2, loc="lower right")
+            ax.legend(fontsize=6, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     fig.tight_layout()
     _save(fig, out)
     plt.close(fig)
@@ -226,24 +255,33 @@ def plot_file(path, outdir=None):
 
 
 def _refinement(run, out):
-    """The points each refining set's invariant was taken on, against time, every pair (a step line)."""
+    """The points each refining set's invariant was taken on, against time (a step line): pairs
+    whose series are the same are one line, labelled with all of them; the legend below the panel."""
     sets = [inv for inv in ("I1", "I2") if any(inv in pr.points_used for pr in run.pairs.values())]
     if not sets:
         return False
-    fig, axes = plt.subplots(1, len(sets), figsize=(5.2 * len(sets), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(sets), figsize=(5.2 * len(sets), 3.8), squeeze=False)
     for ax, inv in zip(axes[0], sets):
-        for k, (name, pr) in enumerate(run.pairs.items()):
+        groups = {}                                     # the same (t, points) series: one line
+        for name, pr in run.pairs.items():
             if inv in pr.points_used and pr.t.size:
                 n = min(pr.t.size, pr.points_used[inv].size)
-                ax.step(pr.t[:n], pr.points_used[inv][:n], where="post", lw=1.0, label=name,
-                        ls=("-", "--", ":", "-.")[k // 10 % 4])
+                key = (pr.t[:n].tobytes(), np.asarray(pr.points_used[inv][:n]).tobytes())
+                groups.setdefault(key, (pr.t[:n], pr.points_used[inv][:n], []))[2].append(name)
+        for k, (t, used, names) in enumerate(groups.values()):
+            label = names[0] if len(names) == 1 else (f"{len(names)} pairs, the same: " + ", ".join(names)
+                                                      if len(names) <= 3 else f"all {len(names)} pairs, the same"
+                                                      if len(names) == len(run.pairs) else
+                                                      f"{len(names)} pairs, the same: {names[0]} … {names[-1]}")
+            ax.step(t, used, where="post", lw=1.0, label=label, ls=("-", "--", ":", "-.")[k // 10 % 4])
         ax.set_yscale("log", base=2)
-        ax.set_title(f"{'loop' if inv == 'I1' else 'surface'} ({inv}): points used", fontsize=10)
+        ax.set_title(f"{'loop' if inv == 'I1' else 'surface'} ({inv})", fontsize=10)
+        ax.set_ylabel("points the invariant was taken on", fontsize=8)
         ax.set_xlabel("t", fontsize=8)
         ax.grid(True, which="major", lw=0.3)
         ax.tick_params(labelsize=7)
-    axes[0, -1].legend(fontsize=6, ncol=2)
-    fig.suptitle("sample sets that refine themselves: the coarsest nested level that resolves the invariant",
+        ax.legend(fontsize=6, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.18), frameon=False)
+    fig.suptitle("refining sample sets: the coarsest nested level\nwhose invariant the monitor vouches for",
                  fontsize=10)
     fig.tight_layout()
     _save(fig, out)
