@@ -73,6 +73,7 @@ def _value(value, error, roundoff, tail):
 
 
 MIN_POINTS = 8           # the fewest points along a direction of a sample set
+SUBSET_BELOW = 1e-3 * UNDER_RESOLVED    # a loop's spectral estimate below this (relative) needs no subset
 
 
 def _check(q, ndim, what):
@@ -148,14 +149,16 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None) -> dict:
     qh = spectral.fourier_coefficients(q)
     tail_q = spectral.loop_tail(q, qh)
     half = q.shape[0] % 2 == 0 and q.shape[0] // 2 >= MIN_POINTS    # the every-other-point subset
-    qh2 = spectral.fourier_coefficients(q[::2]) if half else None
+    qh2 = None
     out = {}
     for form in forms:
         A, Al = one_form_coefficients(q, form, system, p, lam, h)
         ah = spectral.fourier_coefficients(A)
         value = spectral.loop_pairing(A, q, bh=qh, ah=ah)        # in Fourier space (Parseval)
         error, roundoff = spectral.loop_pairing_error(ah, qh, q.shape[0])
-        if half:
+        check = half and error > SUBSET_BELOW * abs(float(value))     # the subset's value, where it can matter
+        if check:
+            qh2 = spectral.fourier_coefficients(q[::2]) if qh2 is None else qh2
             value2 = spectral.loop_pairing(A[::2], q[::2], bh=qh2)
         res = tail_q
         if Al is not None:
@@ -163,10 +166,10 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None) -> dict:
             value += spectral.loop_pairing(Al, lam, bh=lh, ah=alh)
             e2, r2 = spectral.loop_pairing_error(alh, lh, q.shape[0])
             error, roundoff = error + e2, roundoff + r2
-            if half:
+            if check:
                 value2 += spectral.loop_pairing(Al[::2], lam[::2])
             res = spectral.loop_tail(np.concatenate([q, h * lam], axis=-1))   # hλ has the units of q
-        if half:              # two estimates that err large: the smaller is the sharper, and still errs large
+        if check:             # two estimates that err large: the smaller is the sharper, and still errs large
             error = min(error, abs(float(value) - float(value2)))
         if form == "canonical":
             res = max(res, spectral.loop_tail(p, ah))

@@ -167,9 +167,13 @@ def loop_pairing_error(ah, bh, N):
     tb, tau_b, r_b = tail_model(B)
     k = np.arange(1, K + 1, dtype=float).reshape((-1,) + (1,) * (A.ndim - 1))
     m = N - k                                                   # the alias partner, ≥ K ≥ top
-    alpha_a = tau_a * r_a ** (m - ta)
-    alpha_b = tau_b * r_b ** (m - tb)
-    e = np.sum(k * (B[1:] * alpha_a + A[1:] * alpha_b))
+    e = 0.0
+    for tau, r, t0, other in ((tau_a, r_a, ta, B), (tau_b, r_b, tb, A)):
+        live = np.flatnonzero(np.ravel(tau) > 0)                # columns whose tail is a spectrum
+        if live.size:
+            sel = (slice(1, None), live) if A.ndim == 2 else (slice(1, None),)
+            tl, rl = (np.ravel(tau)[live], np.ravel(r)[live]) if A.ndim == 2 else (tau, r)
+            e += float(np.sum(k * other[sel] * (tl * rl ** (m - t0))))
     ro = 8.0 * np.finfo(float).eps * np.sum(k * A[1:] * B[1:])    # the sum's round-off: 8 ulps of its terms' size
     # modes beyond K: Σ_{m>K} m α_a(m) α_b(m), at most K + 1 terms of the geometric tail counted
     rr = r_a * r_b
