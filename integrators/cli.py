@@ -258,9 +258,7 @@ def cmd_run(args) -> int:
     if comm.rank == 0 and len(scene.projections) > 1:      # the scene compares projections: can it?
         from .audit.discrimination import discrimination
         system = scene.system()
-        note = discrimination(system, scene.points(system), scene.h)
-        if note:
-            print(f"note: {note}", flush=True)
+        note = discrimination(system, scene.points(system), scene.h)      # said once, with the summary
     args._resume_hint = (f"poincare run {args.scene or 'default'} -o {out} --resume"
                          + (f" --steps {args.steps}" if args.steps is not None else ""))
     _HINT[:] = [_printable(args._resume_hint)]
