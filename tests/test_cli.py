@@ -480,11 +480,3 @@ def test_plain_errors_for_plain_mistakes(tmp_path):
     with pytest.raises(KeyError, match=r"no pair 'GLRK9-none' in this run; its pairs: GLRK1-none"):
         read_run(out).pairs["GLRK9-none"]
 
-
-def test_the_discrimination_note_is_said_once(tmp_path):
-    """A scene that cannot tell symplectic maps from others (a linear ϑ: the canonical oscillator) says
-    so once, with the summary, not also before the run (issue 56)."""
-    (tmp_path / "d.toml").write_text(USER.replace('projections = ["none"]', 'projections = ["none", "symmetric"]'))
-    r = poincare("run", "d.toml", "-o", "d.h5", "-q", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.count("cannot tell symplectic methods from others") == 1, r.stdout
