@@ -548,3 +548,12 @@ def test_numbers_a_double_cannot_hold_nesting_and_stage_matrices_are_judged_fair
                                                                      'tableaus = ["pipe.toml"]')
     with pytest.raises(SceneError, match=r"'pipe.toml' is not a regular file"):
         parse_scene(text, str(tmp_path / "s.toml"))
+
+
+def test_a_set_of_zero_extent_is_refused():
+    """A loop whose points all coincide has I₁ = 0 and no relative error: one line, not an 'ok' run
+    with '—' (issue 56)."""
+    text = (Path(integrators.__file__).parent / "service" / "scenes" / "point_vortices.toml").read_text()
+    text = text.replace("radii = [0.002, 0.002]", "radii = [0.0, 0.0]")
+    with pytest.raises(SceneError, match=r"^loop: all 256 points are the same point .* zero extent"):
+        parse_scene(text)

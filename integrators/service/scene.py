@@ -826,6 +826,10 @@ def _check_points(scene, system):
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise SceneError(f"{what}: point {k} = {q[k].tolist()} is not finite or outside the domain of {system.name}")
+        if np.all(q == q[0]):             # every point the same: the invariant is 0, no relative error exists
+            raise SceneError(f"{what}: all {q.shape[0]:,} points are the same point {q[0].tolist()} (a set of zero "
+                             "extent: its invariant is 0 and no relative error of it can be measured); give the "
+                             "shape radii or a size > 0")
         with np.errstate(all="ignore"):
             for key, values in (("H", system.H(q)), ("theta", system.theta(q)), ("H's gradient", system.dH(q))):
                 bad = ~np.isfinite(values).reshape(q.shape[0], -1).all(axis=1)
