@@ -425,7 +425,7 @@ def _system_of(eq, path, mu, name):
     if not math.isfinite(values["mu"]):
         raise EquilibriumError(f"{eq.where()}: mu = {mu!r} is not finite")
     params = {sym[k]: v for k, v in values.items()}
-    R03 = _outboard(fields[0], eq, 0.3)
+    R03 = _midplane(fields[0], eq, 0.3)
     system = System(name or f"equilibrium:{Path(path).stem}", [R, Z, phi, u], theta, H, params,
                     symmetry=[0, 0, 1, 0], momentum_name="toroidal momentum", domain=domain, defaults={},
                     fields=fields, source=str(path))
@@ -433,7 +433,7 @@ def _system_of(eq, path, mu, name):
     # midplane of the same flux surface; the default orbits keep well away from it on either side
     # (near it the orbits' periods differ strongly and shear any set out of resolution)
     B = lambda RR: float(system.H(np.array([RR, Za, 0.0, 0.0]))) / values["mu"] if values["mu"] else 0.0
-    Bmax = B(_inboard(fields[0], eq, 0.3))
+    Bmax = B(_midplane(fields[0], eq, 0.3, outboard=False))
     u_c = math.sqrt(max(2 * values["mu"] * (Bmax - B(R03)), 0.0))
     u_pass = max(v / math.sqrt(2), 1.5 * u_c)
     system.defaults.update({"q0": [R03, Za, 0.0, u_pass], "trapped": [R03, Za, 0.0, u_c / 3 if u_c else 0.15 * v],
@@ -442,25 +442,17 @@ def _system_of(eq, path, mu, name):
     return system
 
 
-def _outboard(psi, eq, psi_n):
-    """R on the outboard midplane (Z of the axis) where ψ_N = psi_n."""
+def _midplane(psi, eq, psi_n, outboard=True):
+    """R on the outboard (or inboard) midplane, at the axis's Z, where ψ_N = psi_n (the grid's
+    first point of 400 from the axis to the box's edge past it)."""
     Ra, Za = eq.axis
-    Rs = np.linspace(Ra, eq.box[1], 400)
+    Rs = np.linspace(Ra, eq.box[1] if outboard else eq.box[0], 400)
     pn = psi(Rs, np.full_like(Rs, Za)) / eq.psi_span
     i = int(np.argmax(pn >= psi_n)) if np.any(pn >= psi_n) else Rs.size - 1
     return float(Rs[i])
 
 
 H_PER_TRANSIT = 320         # default steps per poloidal transit of the default passing orbit
-
-
-def _inboard(psi, eq, psi_n):
-    """R on the inboard midplane (Z of the axis) where ψ_N = psi_n."""
-    Ra, Za = eq.axis
-    Rs = np.linspace(Ra, eq.box[0], 400)
-    pn = psi(Rs, np.full_like(Rs, Za)) / eq.psi_span
-    i = int(np.argmax(pn >= psi_n)) if np.any(pn >= psi_n) else Rs.size - 1
-    return float(Rs[i])
 
 
 def _default_h(eq, R, u, psi_n=0.3):
