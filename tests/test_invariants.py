@@ -161,7 +161,9 @@ def test_the_monitor_bounds_the_value_of_an_aliased_loop():
         q = _band_limited_loop(N)
         v = invariants.first_invariant(q, "noncanonical", system=GC)
         err = abs(v.value - ref) / abs(ref)
-        assert v.error / abs(v.value) >= err, (N, err, v.error)
+        # the estimate bounds the aliasing; below 1e-12 the error is the reference's and the FFT's own
+        # round-off, whose size depends on the CPU's FFT kernel: not asserted there
+        assert err < 1e-12 or v.error / abs(v.value) >= err, (N, err, v.error)
         assert v.under_resolved == (err > invariants.UNDER_RESOLVED) or (v.under_resolved and N <= 72), (N, err, v)
         assert spectral.loop_tail(q) < invariants.UNDER_RESOLVED       # q alone looks resolved
         wrong += err > invariants.UNDER_RESOLVED
@@ -185,7 +187,7 @@ def test_the_monitor_bounds_the_value_of_an_aliased_surface():
         v = invariants.second_invariant(S, "noncanonical", system=lv)
         err = abs(v.value - ref) / abs(ref)
         assert v.under_resolved == (err > invariants.UNDER_RESOLVED), (n, err, v)
-        assert v.error / abs(v.value) >= err / 2, (n, err, v)
+        assert err < 1e-12 or v.error / abs(v.value) >= err / 2, (n, err, v)    # (round-off: as for loops)
         c = np.abs(spectral.chebyshev_coefficients(spectral.chebyshev_coefficients(S, 0), 1))
         assert spectral.coefficient_tail(c) < invariants.UNDER_RESOLVED
         flagged.append(v.under_resolved)
