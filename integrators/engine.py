@@ -4,9 +4,11 @@ Every run — :func:`integrators.integrate`, the MPI driver, ``poincare audit`` 
 advances points through :class:`Engine` and :func:`march`:
 
 * :class:`State` owns everything a point carries from step to step.  Its
-  :data:`CHECKPOINT_FIELDS` are the checkpoint schema of the HDF5 files; the Newton factors it
-  also keeps are dropped at every output (:meth:`State.forget_jacobians`), so a run resumed from
-  a checkpoint is bitwise the run it continues.
+  :data:`CHECKPOINT_FIELDS` are the checkpoint schema of the HDF5 files.  The Newton factors it
+  keeps from step to step are not stored; where they were taken is (``jac_z``, ``jac_q``,
+  ``jac_lam``), and a state read from a checkpoint rebuilds them bitwise before its first step
+  (:func:`integrators.kernel.refactor`).  So a run split into calls anywhere (outputs,
+  ``save_every``, checkpoints, resumes) is bitwise the run in one call.
 * :class:`Engine` is one (tableau, projection) pair for a system and a step size.  The tableau
   and the projection are runtime data of the compiled kernel (:mod:`integrators.kernel`): one
   compilation serves every pair and every system.
@@ -44,7 +46,7 @@ class LaneUse(NamedTuple):
     iterations: int
 
 CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
-                     "iterations", "steps")
+                     "iterations", "steps", "have_lu", "jac_z", "jac_q", "jac_lam")
 
 
 def set_threads(n: int | None):
@@ -122,9 +124,12 @@ class State:
     ``q_comp, p_comp`` compensated-summation terms; ``Y`` (n, s, d) the last step's stage
     displacements and ``mu`` its Lobatto multiplier (the next step's guesses); ``have_history``
     whether a point has taken a step; ``live`` whether it has not broken down; ``breakdown_time``
-    (inf if never); ``iterations`` Newton iterations summed; ``steps`` steps taken.  These are
-    :data:`CHECKPOINT_FIELDS`.  The Newton factors ``lu, piv`` (valid where ``have_lu``) are not:
-    :meth:`forget_jacobians` at every checkpoint.
+    (inf if never); ``iterations`` Newton iterations summed; ``steps`` steps taken; ``have_lu``
+    whether it carries Newton factors into its next step, and where they were taken: ``jac_z``
+    (n, s + 2, d) the iterate (its first nz = s·d (+ d) (+ d) entries, flat), ``jac_q``, ``jac_lam``
+    (n, d) that step's q_n and Λ_n.  These are :data:`CHECKPOINT_FIELDS`.  The factors themselves
+    (``lu``, ``piv``: n·nz² numbers) are not; a state made from a checkpoint rebuilds them before
+    its first step (``needs_factors``; :func:`integrators.kernel.refactor`), bitwise.
     """
 
     def __init__(self, q, p, lam, h, s, dtype=np.float64):
@@ -146,6 +151,10 @@ class State:
         self.lu = np.empty((n, 0, 0), dt)
         self.piv = np.empty((n, 0), np.int64)
         self.have_lu = np.zeros(n, dtype=bool)
+        self.jac_z = np.zeros((n, s + 2, d), dt)
+        self.jac_q = np.zeros((n, d), dt)
+        self.jac_lam = np.zeros((n, d), dt)
+        self.needs_factors = False      # have_lu read from a checkpoint: lu, piv to be rebuilt
 
     @classmethod
     def from_checkpoint(cls, fields, h):
@@ -155,6 +164,7 @@ class State:
         st = cls(q1, q1, np.zeros_like(q1), h, fields["Y"].shape[1])
         for name in CHECKPOINT_FIELDS:
             setattr(st, name, np.ascontiguousarray(fields[name]).copy())
+        st.needs_factors = bool(st.have_lu.any())
         return st
 
     @classmethod
@@ -178,8 +188,10 @@ class State:
         return {name: getattr(self, name) for name in CHECKPOINT_FIELDS}
 
     def forget_jacobians(self):
-        """Start every point's next solve from a fresh Jacobian (done at every checkpoint)."""
+        """Start every point's next solve from a fresh Jacobian (not done by any run: a study of
+        what the carried factors change)."""
         self.have_lu[:] = False
+        self.needs_factors = False
 
     @classmethod
     def double_double(cls, q, p, lam, h, s):
@@ -194,9 +206,10 @@ class State:
         st.q, st.p = q2.copy(), p2.copy()
         from .ddouble import scale_array
         st.Lam = scale_array(np.ascontiguousarray(l2), float(h))
-        for name in ("q_comp", "p_comp", "mu"):
+        for name in ("q_comp", "p_comp", "mu", "jac_q", "jac_lam"):
             setattr(st, name, np.zeros_like(q2))
         st.Y = np.zeros(st.Y.shape + (2,))
+        st.jac_z = np.zeros(st.jac_z.shape + (2,))
         st.lu = np.empty(st.lu.shape + (2,))
         return st
 
@@ -209,10 +222,11 @@ class State:
             n = self.q.shape[0]
             self.lu = np.empty((n, nz, nz) + self.q.shape[2:], self.q.dtype)   # (double-double: a last axis of 2)
             self.piv = np.empty((n, nz), np.int64)
-            self.have_lu[:] = False
+            self.needs_factors = bool(self.have_lu.any())     # factors noted but not at hand: rebuilt
         u8 = lambda x: x.view(np.uint8)
         return (self.q, self.p, self.Lam, self.q_comp, self.p_comp, self.Y, self.mu, u8(self.have_history),
-                u8(self.live), self.breakdown_time, self.iterations, self.steps, self.lu, self.piv, u8(self.have_lu))
+                u8(self.live), self.breakdown_time, self.iterations, self.steps, self.lu, self.piv, u8(self.have_lu),
+                self.jac_z, self.jac_q, self.jac_lam)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -386,8 +400,11 @@ class Engine:
                 self._functions[key] = ev, inside, W
             ev, inside, W = self._functions[key]
             rounds = self._rounds(state, block)
+            arrays = state._tuple(self.nz)
+            if state.needs_factors:
+                self._refactor(state, arrays, True, False)
             kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
-                           int(nsteps), int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg_dd,
+                           int(nsteps), int(block), arrays, (0,) * self.system.d, self._cfg_dd,
                            (0.0,) * W, self._layout(), rounds)
             return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
         cplx = bool(np.iscomplexobj(state.q))
@@ -402,10 +419,27 @@ class Engine:
             self._functions[key] = ev, inside, W
         ev, inside, W = self._functions[key]
         rounds = self._rounds(state, block)
+        arrays = state._tuple(self.nz)
+        if state.needs_factors:
+            self._refactor(state, arrays, False, cplx)
         kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
-                       int(block), state._tuple(self.nz), (0,) * self.system.d, self._cfg, (0,) * W, self._layout(),
+                       int(block), arrays, (0,) * self.system.d, self._cfg, (0,) * W, self._layout(),
                        rounds)
         return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
+
+    def _refactor(self, state, arrays, double_double, cplx):
+        """The Newton factors of a state that notes them but does not hold them (read from a
+        checkpoint), rebuilt where they were taken, by the scalar path (kernel.refactor)."""
+        from . import kernel
+        key = ("dd", 1) if double_double else (cplx, 1)
+        if key not in self._functions:
+            ev, inside = point_functions(self.system, cplx, precision="double-double") if double_double else \
+                point_functions(self.system, cplx)
+            self._functions[key] = ev, inside, 1
+        ev = self._functions[key][0]
+        kernel.refactor(ev, self.k, self.tab, tuple(self.plan), self.h, arrays, int(self.nz), (0,) * self.system.d,
+                        (0.0,) if double_double else (0,), self._layout())
+        state.needs_factors = False
 
     @staticmethod
     def _rounds(state, block):
@@ -508,11 +542,11 @@ def march(engine, state, start, stop, every, on_output=None, progress=None, chec
           block=BLOCK):
     """The time loop: advance ``state`` from step ``start`` to ``stop``.
 
-    After every step that is a multiple of ``every`` the Newton factors are dropped (a checkpoint
-    may be written there) and ``on_output(step)`` is called.  The kernel is called for as many
-    steps as take about ``target`` seconds (never past an output), with ``progress(step)`` and
-    ``check()`` (which may raise to stop the run) between calls; how the steps are grouped
-    changes no bits.  Returns the seconds spent advancing.
+    After every step that is a multiple of ``every``, ``on_output(step)`` is called (a checkpoint
+    may be written there).  The kernel is called for as many steps as take about ``target`` seconds
+    (never past an output), with ``progress(step)`` and ``check()`` (which may raise to stop the
+    run) between calls; how the steps are grouped, and ``every``, change no bits (the state carries
+    Newton's factors across calls, and a checkpoint notes where they were taken).  Returns the seconds spent advancing.
     """
     step, batch, spent = start, 1, 0.0
     while step < stop:
@@ -526,10 +560,8 @@ def march(engine, state, start, stop, every, on_output=None, progress=None, chec
         spent += dt
         step += n
         batch = int(min(max(1, n * target / dt if dt > 0 else 2 * n), 4 * n, 1 << 20))
-        if step % every == 0:
-            state.forget_jacobians()
-            if on_output is not None:
-                on_output(step)
+        if step % every == 0 and on_output is not None:
+            on_output(step)
         if progress is not None:
             progress(step)
     return spent

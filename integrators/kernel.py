@@ -26,7 +26,9 @@ or rank count (tests/test_lanes.py).  No fastmath, no fused multiply–add.
 The unknowns of a step are z = [Y_1 … Y_s, Λ (coupled projections), μ (Lobatto)] with
 Y_i = h V_i the stage displacements and Λ = hλ (see integrators/projections.py).  Newton uses the
 exact Jacobian, factorised by a small dense LU with partial pivoting and kept across iterations and
-steps while it contracts.
+steps while it contracts.  The state records where each point's factors were taken (the iterate z,
+and q_n and Λ_n of that step): :func:`refactor` rebuilds the same factors from it, so a run resumed
+from a checkpoint, or split into calls anywhere, is bitwise the run in one call.
 """
 from __future__ import annotations
 
@@ -156,8 +158,8 @@ Scratch = namedtuple("Scratch", [
     "pcn", "ln", "sYs", "mug", "qr",
     # Newton: unknowns, evaluated iterate, residual, fresh Jacobian, projection's Newton, guesses
     "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess",
-    # the points' own state while the group is advanced
-    "q", "p", "lam", "qc", "pc", "Y", "mu", "lu",
+    # the points' own state while the group is advanced; jz, jq, jl: where its factors lu were taken
+    "q", "p", "lam", "qc", "pc", "Y", "mu", "lu", "jz", "jq", "jl",
     "size"])
 Scratch.__doc__ = "Offsets (in logical elements; × W in memory) of the scratch buffers of a group."
 
@@ -198,7 +200,7 @@ def layout(s, d, nz):
         pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
         **dict.fromkeys(D_VECTORS, d),
         z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd,
-        q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz))
+        q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz, jz=nz, jq=d, jl=d))
     F = _offsets(Flags, dict(scale=nz, pscale=d, **dict.fromkeys(Flags._fields[2:-1], 1)))
     IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d, pt=1))
     return S, F, IP
@@ -213,7 +215,7 @@ Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads
 adds h·q̇(q_n) to the stage predictor."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
-                                        "lu piv have_lu")
+                                        "lu piv have_lu jac_z jac_q jac_lam")
 StateArrays.__doc__ = """The per-point arrays of integrators.engine.State as the kernel takes them (State._tuple:
 a plain tuple in this order, the boolean flags viewed as uint8; value arrays with a last axis of 2
 in double-double)."""
@@ -629,6 +631,18 @@ def _keep_factors(LU, piv, Jt, pivt, stale, nz):
 
 
 @njit(inline='always', **_OPTS)
+def _note_jacobian(z, stale, nz, d, w, S):
+    """The point a fresh Jacobian was taken at (the iterate z, and the step's q_n and Λ_n) into jz,
+    jq, jl for the lanes ``stale``."""
+    jz, jq, jl, q, lam = at(w, S.jz), at(w, S.jq), at(w, S.jl), at(w, S.q), at(w, S.lam)
+    for i in range(nz):
+        st(jz, i, sel(stale, ld(z, i), ld(jz, i)))
+    for m in range(d):
+        st(jq, m, sel(stale, ld(q, m), ld(jq, m)))
+        st(jl, m, sel(stale, ld(lam, m), ld(jl, m)))
+
+
+@njit(inline='always', **_OPTS)
 def _update(z, r, done, scale, nz, f, F):
     """z −= δ (r holds −δ) in the lanes not done; per lane the update's size max |δ|/scale
     (``F.norm``), whether it was NaN and whether the new z is finite."""
@@ -715,6 +729,8 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
             lu_factor(Jx, pivx, nz)
             if W > 1:                             # every lane factorised, the lanes that asked keep theirs
                 _keep_factors(LU, piv, Jt, pivt, stale, nz)
+            if mode == MODE_MAIN:                 # where they were taken: what refactor() rebuilds them from
+                _note_jacobian(z, stale, nz, d, w, S)
         lu_solve(LU, piv, r, nz)                  # r is now −δ
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         _update(z, r, done, scale, nz, f, F)
@@ -907,15 +923,19 @@ def _commit(inside, k, plan, d, s, iM, w, S, f, F, qr):
 def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
     """Advance the live lanes by one step; returns the lanes whose step is over (taken, or broken down).
 
-    A step that fails from the extrapolated guess (and the last step's Jacobian) is tried once more
-    from h·q̇(q_n) with a fresh Jacobian; a lane that still fails (Newton does not converge, a value
-    is not finite, q leaves the domain) is frozen at its last good state with its breakdown time set
-    to ``t_next``.  The second try is the lane's next call of this function (``F.retry`` set, its
-    step not over), made beside its neighbours' next steps instead of in a pass of its own in which
-    they would wait; it computes what a pass of its own would."""
+    A step is tried from up to three starts before a lane breaks down: (0) the extrapolated stage
+    guess with the Newton factors carried from the last step; if that fails, (1) the same guess with
+    a Jacobian taken there (only when try 0 used carried factors); then (2) h·q̇(q_n) at every stage,
+    μ = 0, with a Jacobian taken there.  A first step starts at (2).  A lane whose last try fails
+    (Newton does not converge, a value is not finite, q leaves the domain) is frozen at its last good
+    state with its breakdown time set to ``t_next``.  Each further try is the lane's next call of this
+    function (``F.retry``: the next try's number, its step not over), made beside its neighbours'
+    next steps instead of in a pass of its own in which they would wait; it computes what a pass of
+    its own would."""
     live = ld(f, F.live) != 0.0
     fresh = ld(f, F.hist) == 0.0
-    again = mand(live, ld(f, F.retry) != 0.0)
+    tries = ld(f, F.retry)
+    last = tries == 2.0
     c = _coefficients(tb, s)
     Ys, guess, v = at(w, S.Y), at(w, S.guess), at(w, S.vf)
     velocity = cfg.velocity != 0.0              # the predictor: with h·q̇(q_n) as a node at 0
@@ -929,18 +949,19 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
             if velocity:
                 acc = acc + c.E[i * (s + 1) + s] * ld(v, m)
             st(guess, i * d + m, acc)
-    first = mand(live, mor(fresh, again))       # a first step, or a second try: from h·q̇(q_n)
+    first = mand(live, mor(fresh, last))        # a first step, or the last try: from h·q̇(q_n)
     if anyl(first):
         _first_guess(ev, k, at(w, S.q), h, guess, first, d, s, w, S, ip, IP)
     mu, mug = at(w, S.mu), at(w, S.mug)
-    for m in range(d):                          # μ's guess: the last step's, zero on a second try
-        st(mug, m, sel(again, 0.0, ld(mu, m)))
+    for m in range(d):                          # μ's guess: the last step's, zero on the last try
+        st(mug, m, sel(last, 0.0, ld(mu, m)))
     st(f, F.active, sel(live, 1.0, 0.0))
-    _attempt(mand(ld(f, F.have) != 0.0, mnot(again)), guess, mug, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip,
-             IP, qr, cfg)
+    known = mand(ld(f, F.have) != 0.0, tries == 0.0)   # carried factors: try 0 only
+    _attempt(known, guess, mug, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
     ok = ld(f, F.okstep) != 0.0
-    retry = mand(live, mand(mnot(ok), mnot(mor(fresh, again))))
-    st(f, F.retry, sel(live, sel(retry, 1.0, 0.0), ld(f, F.retry)))
+    nxt = sel(known, 1.0, sel(mor(fresh, last), 3.0, 2.0))   # the try after a failed one (3: none left)
+    retry = mand(live, mand(mnot(ok), nxt < 3.0))
+    st(f, F.retry, sel(live, sel(retry, nxt, 0.0), ld(f, F.retry)))
     st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
     good = mand(live, ok)
     st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
@@ -958,6 +979,12 @@ def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
     has no factors)."""
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
     hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
+    jz, jq, jl = st_.jac_z, st_.jac_q, st_.jac_lam
+    for m in range(d):
+        lset(w, S.jq + m, l, elem(jq, pt, m))
+        lset(w, S.jl + m, l, elem(jl, pt, m))
+    for i in range(nz):
+        lset(w, S.jz + i, l, elem3(jz, pt, i // d, i % d))
     for m in range(d):
         lset(w, S.q + m, l, elem(q, pt, m))
         lset(w, S.p + m, l, elem(p, pt, m))
@@ -992,6 +1019,12 @@ def _scatter(st_, pt, l, d, s, nz, w, S, f, F, ip, IP):
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
     hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
     itn, stp = st_.iterations, st_.steps
+    jz, jq, jl = st_.jac_z, st_.jac_q, st_.jac_lam
+    for m in range(d):
+        put(jq, pt, m, lget(w, S.jq + m, l))
+        put(jl, pt, m, lget(w, S.jl + m, l))
+    for i in range(nz):
+        put3(jz, pt, i // d, i % d, lget(w, S.jz + i, l))
     for m in range(d):
         put(q, pt, m, lget(w, S.q + m, l))
         put(p, pt, m, lget(w, S.p + m, l))
@@ -1147,6 +1180,43 @@ def scalars_dd_points(sc, k, q2, out):
     P = (0.0,)
     for i in range(n):
         sc(lanes(q2, i * d, P), _at(k, 0), lanes(out, i * 2, P))
+
+
+@njit(**_OPTS)
+def refactor(ev, k, tab, plan, h, st_, nz, dim, proto, lay):
+    """Rebuild the Newton factors ``lu, piv`` of every point that has them (``have_lu``) from where
+    they were taken (``jac_z``, ``jac_q``, ``jac_lam``): the step's equations' Jacobian at that
+    iterate, factorised, as :func:`_newton` did (one lane: W = 1, ``ev`` the scalar point function;
+    a lane's factors are the scalar path's bits).  What a state read from a checkpoint needs before
+    it is advanced, so that the resumed run is bitwise the run it continues.  (One thread: once per
+    resume, one Jacobian a point.)"""
+    arrays = StateArrays(*st_)
+    n = arrays.q.shape[0]
+    d = len(dim)
+    s = arrays.Y.shape[1]
+    S, F, IP = _records(lay)
+    kp, tb = _at(k, 0), _at(tab, 0)
+    pl = Plan(*plan)
+    have, lu, piv = arrays.have_lu, arrays.lu, arrays.piv
+    WS = np.zeros(S.size * (arrays.q.ndim - 1), arrays.q.dtype)
+    IS = np.zeros(IP.size, np.int64)
+    w, ip = lanes(WS, 0, proto), lanes(IS, 0, plain(proto))
+    for pt in range(n):
+        if have[pt] == 0:
+            continue
+        for m in range(d):
+            lset(w, S.q + m, 0, elem(arrays.jac_q, pt, m))
+            lset(w, S.lam + m, 0, elem(arrays.jac_lam, pt, m))
+        for i in range(nz):
+            lset(w, S.z + i, 0, elem3(arrays.jac_z, pt, i // d, i % d))
+        _prepare(ev, kp, pl, d, w, S)
+        LU, pv = at(w, S.lu), at(ip, IP.piv)
+        _main(at(w, S.z), True, at(w, S.r), LU, ev, kp, h, tb, pl, d, s, w, S)
+        lu_factor(LU, pv, nz)
+        for i in range(nz):
+            for j in range(nz):
+                put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, 0))
+            piv[pt, i] = lget(ip, IP.piv + i, 0)
 
 
 @njit(**_OPTS)

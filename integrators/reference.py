@@ -647,9 +647,9 @@ CHUNK = 20000    # points advanced together; larger batches spill out of the cac
 def advance(stepper: Stepper, state: State, t_next: float, chunk: int = CHUNK):
     """Advance every live point of ``state`` by one step (in place), ``chunk`` points at a time.
 
-    A point whose step fails from the extrapolated guess (and the last step's Jacobian) is
-    tried once more from the vector-field guess h·q̇(q_n) and a fresh Jacobian before it is
-    declared broken down.  The chunking changes no bits (a point's step does not depend on its
+    A point whose step fails from the extrapolated guess and the last step's Jacobian is tried
+    again from that guess with a fresh Jacobian, then from the vector-field guess h·q̇(q_n) (μ = 0)
+    with a fresh Jacobian, before it is declared broken down (the compiled engine's ladder).  The chunking changes no bits (a point's step does not depend on its
     batch); it keeps the working arrays small: at 200,000 points one batch runs at 99k
     point-steps/s, chunks of 20,000 at 136k.
     """
@@ -665,8 +665,15 @@ def _advance(stepper, state, idx, t_next):
     guess = stepper.extrapolate(state.Y[idx])
     if fresh.any():
         guess[fresh] = stepper.first_guess(state.q[idx[fresh]])
+    known = state.have_jinv[idx].copy() if state.jinv is not None else np.zeros(idx.size, dtype=bool)
     ok, new = _attempt(stepper, state, idx, guess, state.mu[idx])
     _commit(state, idx, ok, new)
+    again = ~ok & known           # carried factors failed: the same guess with a Jacobian taken there
+    if again.any():
+        aidx = idx[again]
+        ok_a, new_a = _attempt(stepper, state, aidx, guess[again], state.mu[aidx], reuse=False)
+        _commit(state, aidx, ok_a, new_a)
+        ok[again] = ok_a
     retry = ~ok & ~fresh
     if retry.any():
         ridx = idx[retry]

@@ -64,7 +64,7 @@ def summary(name, steps_list, total):
 
 def compiled_breakdown(system, name, q, h, steps, tolerances, every=1000):
     """(breakdown step or None, max |ΔH|/|H₀| over the outputs) of unprojected ``name`` on the compiled
-    engine with Newton's ``tolerances`` (Jacobians dropped every ``every`` steps, at the outputs)."""
+    engine with Newton's ``tolerances`` (outputs every ``every`` steps)."""
     from integrators.engine import Engine, march
     engine = Engine(system, integrators.tableau(name), "none", h, tolerances=tolerances)
     st = engine.state(q)
@@ -124,8 +124,6 @@ def newton_tolerance(args):
         while S.live[0] and k < args.steps:
             k += 1
             reference.advance(st, S, k * h)
-            if k % 1000 == 0:
-                S.forget_jacobians()          # as the compiled engine does at each output
         row = dict(tol=tol, breakdown_step=None if S.live[0] else k, steps=args.steps,
                    wall_s=round(time.perf_counter() - t0, 1))
         print(f"GLRK2-none numpy engine, Newton tol {tol:.1e}: "
@@ -154,8 +152,6 @@ def stopping_rule(args):
             reference.advance(st, S, k * h)
             if first is None and st.unconverged:
                 first = k
-            if k % 1000 == 0:
-                S.forget_jacobians()          # as the compiled engine does at each output
             if k % 10 == 0 and S.live[0]:
                 worst = max(worst, float(abs(system.H(S.q)[0] - H0) / abs(H0)))
             if k % tenth == 0:

@@ -1,4 +1,6 @@
 """Breakdowns and degenerate inputs (integrators/engine.py, kernel.py): adversarial inputs break nothing and bad points break down alone (docs/stability.md)."""
+import re
+
 import h5py
 import numpy as np
 import pytest
@@ -90,3 +92,58 @@ def test_service_with_a_huge_step_finishes_with_a_readable_file(tmp_path):
         for name in ("GLRK2-symmetric", "GLRK2-none"):
             g = f["runs"][name]
             assert g["t"].shape == (4,) and g.attrs["status"] in ("ok", "under-resolved", "partial", "failed")
+
+
+CADENCE_CASES = [  # (scene, pair, h: large enough that points break down at steps spread over the run)
+    ("guiding_centre_tokamak", ("GLRK2", "none"), 20.0),
+    ("point_vortices", ("GLRK2", "symmetric"), 1.0),
+    ("lotka_volterra", ("SRK3", "symplectic"), 0.5),
+]
+
+
+@pytest.mark.parametrize("scene,pair,h", CADENCE_CASES)
+def test_results_and_breakdowns_do_not_depend_on_the_output_cadence(scene, pair, h):
+    """q, p, λ, the Newton iterations and the breakdown times after 40 steps are bitwise the same for
+    save_every 1, 8 and 40, on points of which some break down at steps spread over the run
+    (issue 56: the last step's Newton factors used to be dropped at every output)."""
+    from integrators.service.scene import load_scene
+    sc = load_scene(scene)
+    q0 = sc.loop_points()[::8]
+    sols = [integrators.integrate(sc.system(), q0, *pair, h=h, steps=40, save_every=k) for k in (1, 8, 40)]
+    steps = sols[0].breakdown_time[np.isfinite(sols[0].breakdown_time)] / h
+    assert 0 < steps.size < len(q0) or len(np.unique(steps)) > 1, "the case must break points down at several steps"
+    for s in sols[1:]:
+        for f in ("newton_iterations", "breakdown_time", "steps_taken"):
+            assert np.array_equal(getattr(sols[0], f), getattr(s, f)), f
+        for f in ("q", "p", "lam"):
+            assert np.array_equal(getattr(sols[0], f)[-1], getattr(s, f)[-1]), f
+            every = s.t.size - 1
+            assert np.array_equal(getattr(sols[0], f)[::40 // every], getattr(s, f)), f
+
+
+def test_the_driver_gives_the_same_file_values_for_output_every_1_and_10(tmp_path):
+    """A scene run with output_every = 1 and 10: the same breakdown times, and the same points and
+    invariants at every output both wrote (issue 56)."""
+    from integrators.service.reader import read_run
+    from integrators.service.scene import load_scene
+    text = load_scene("lotka_volterra").text
+    text = text[:text.index("[surface]")] + text[text.index("[run]"):]
+    for key, value in (("tableaus", '["SRK3"]'), ("projections", '["symplectic", "none"]'), ("h", "0.5"),
+                       ("steps", "40"), ("forms", '["canonical"]')):
+        text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
+    text = text.replace("[run]\n", "[run]\nstore_points = true\n")
+    runs = []
+    for every in (1, 10):
+        path = tmp_path / f"every{every}.h5"
+        driver.run(parse_scene(re.sub(r"(?m)^output_every = .*$", f"output_every = {every}", text)), path,
+                   progress=False)
+        runs.append(read_run(path))
+    one, ten = runs
+    for name in ("SRK3-symplectic", "SRK3-none"):
+        a, b = one[name], ten[name]
+        assert np.isfinite(a.breakdown_time).any(), name
+        assert np.array_equal(a.breakdown_time, b.breakdown_time), name
+        keep = np.isin(a.t, b.t)
+        assert keep.sum() == b.t.size == 5
+        assert np.array_equal(a.points["loop"][keep], b.points["loop"], equal_nan=True), name
+        assert np.array_equal(a.I1["canonical"][keep], b.I1["canonical"], equal_nan=True), name

@@ -75,11 +75,13 @@ def test_unprojected_gauss_drifts_off_the_constraint_on_lotka_volterra():
 
 
 def test_newton_iterations_per_step():
-    """One exact Jacobian per step, reused: about five residual evaluations per step (h = 10).
+    """The exact Jacobian, carried from step to step and refreshed when an iteration contracts by less
+    than 100×: about six residual evaluations per step (h = 10; 6.2 measured, 4.9 when every step
+    takes its own Jacobian, as save_every = 1 did before issue 56).
 
     (Scaling the Jacobian by 1.1 raises this to 13 iterations, so the bound catches a wrong Jacobian.)
     """
     sy = integrators.system("guiding_centre_symmetric")
     q0 = np.array(sy.defaults["q0"])
     sol = integrators.integrate(sy, q0, tableau="GLRK2", projection="symmetric", h=10, steps=50)
-    assert sol.mean_newton_iterations <= 5.5
+    assert sol.mean_newton_iterations <= 7.0

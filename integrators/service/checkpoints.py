@@ -95,9 +95,13 @@ def write_slab(folder, name, state: dict, s_max):
 
 
 def _pad_stages(state, s_max):
+    """Y (n, s, d) and jac_z (n, s + 2, d) padded with zeros to the scene's largest s (the file's
+    schema); driver._unpad cuts them back."""
     Y = state["Y"]
-    if Y.shape[1] < s_max:
-        state = dict(state, Y=np.concatenate([Y, np.zeros((Y.shape[0], s_max - Y.shape[1], Y.shape[2]))], axis=1))
+    extra = s_max - Y.shape[1]
+    if extra > 0:
+        pad = lambda a: np.concatenate([a, np.zeros((a.shape[0], extra) + a.shape[2:], a.dtype)], axis=1)
+        state = dict(state, Y=pad(Y), jac_z=pad(state["jac_z"]))
     return state
 
 

@@ -552,15 +552,15 @@ def _starting_state(comm, engine, q0, blocks, saved, s_tab, h):
 def last_checkpoint_step(steps, every) -> int:
     """The step of a finished pair's checkpoint: the last multiple of ``every`` (run.output_every).
 
-    Newton's factors are dropped at every multiple of the cadence, so a state there continues
-    bitwise as the uninterrupted run would; when ``steps`` is not a multiple, the last output (at
-    ``steps``) is a real output but the state kept is the one before it, from which a resume or a
-    longer run continues (it recomputes that last partial interval, or goes on past it)."""
+    A state continues bitwise as the uninterrupted run would from any step (it notes where its
+    Newton factors were taken, and they are rebuilt from that); when ``steps`` is not a multiple, the last output (at ``steps``) is a real output but the
+    state kept is the one at the last multiple, from which a resume or a longer run continues (it
+    recomputes that last partial interval, or goes on past it: on the cadence's grid)."""
     return steps - steps % every
 
 
 def _unpad(state, s):
-    return dict(state, Y=state["Y"][:, :s])
+    return dict(state, Y=state["Y"][:, :s], jac_z=state["jac_z"][:, :s + 2])
 
 
 BATCH_SECONDS = 2.0          # outputs are taken together in batches of about this much advancing

@@ -7,7 +7,7 @@ t = 0 and advanced, with the pair's own integrator and step, to the output where
 needed (the catch-up), and from then on alongside.  No point is interpolated, and a point's bits
 do not depend on when it was started: the engine's result for a point does not depend on its
 batch, and the new points are stepped output interval by output interval as the set's own are
-(Newton's factors dropped at every output), so they are bitwise what they would be had the set
+(how a run is split into calls changes no bits), so they are bitwise what they would be had the set
 been that fine from the start.
 
 At each output the set's invariants are taken on the coarsest level whose resolution monitor
