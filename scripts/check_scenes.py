@@ -3,6 +3,7 @@
     python scripts/check_scenes.py                      # every built-in scene (paper_poincare: ~17 min)
     python scripts/check_scenes.py default lotka_volterra
     python scripts/check_scenes.py --json docs/figures/scenes_resolution.json
+    python scripts/check_scenes.py --keep runs/       # keep the run files (then: poincare plot runs/NAME.h5)
 
 The evidence behind "the shipped scenes' summaries show no under-resolved set" (docs/scenes.md):
 the monitor is invariants.forms' relative size of the top eighth of the modes, largest over the forms
@@ -44,12 +45,15 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="*", help="built-in scene names (default: all)")
     ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--keep", help="write the run files into this folder (default: a temporary one)")
     args = ap.parse_args(argv)
     names = args.scenes or list(builtin_scenes())
     results = []
     with tempfile.TemporaryDirectory() as tmp:
+        if args.keep:
+            Path(args.keep).mkdir(parents=True, exist_ok=True)
         for name in names:
-            r = check(name, tmp)
+            r = check(name, args.keep or tmp)
             results.append(r)
             statuses = sorted({p["status"] for p in r["pairs"]})
             worst = {inv: max(p["monitor"].get(inv, 0.0) for p in r["pairs"]) for inv in ("I1", "I2")}
