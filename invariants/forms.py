@@ -3,7 +3,13 @@
 Sign conventions (docs/conventions.md):
 
 * Ω̄_ij = ∂_iϑ_j − ∂_jϑ_i, so dϑ = ½ Ω̄_ij dq^i ∧ dq^j.
-* I₁[γ] = ∮ α(q) (dq/dτ) dτ with τ ∈ [0, 1) in the loop's sample order.
+* I₁[γ] = ∮ α(q) (dq/dτ) dτ with τ ∈ [0, 1) in the loop's sample order.  For the canonical form
+  that is ∮ p·dq itself, not (1/2π)∮ p·dq as codes that report actions do: a loop of action J
+  gives I₁ = 2πJ.
+* Periodic coordinates (``period=``): q^i and q^i + P_i are the same point.  A set's samples may be
+  wrapped (into [0, P) or anywhere); the differences between neighbours are unwrapped (each taken
+  into (−P/2, P/2]) before the spectral derivative, and a loop that winds m times around the
+  coordinate contributes m·P·mean(α_i) exactly.
 * I₂[S] = ∫∫ Ω_ab x_σ^a x_τ^b dσ dτ for the two-form ½Ω_ab dx^a ∧ dx^b, σ the first
   and τ the second array axis; by Stokes I₂[S] = I₁[∂S] with ∂S traversed
   counter-clockwise in the (σ, τ) square (σ = 1 side run with τ increasing).
@@ -31,6 +37,7 @@ from integrators.simd import _at
 from . import spectral
 
 FORMS = ("canonical", "noncanonical", "corrected")
+EPS = np.finfo(np.float64).eps
 UNDER_RESOLVED = 1e-10   # documented threshold of the resolution monitor
 
 
@@ -52,6 +59,8 @@ class InvariantValue:
     roundoff : the value's round-off relative to |value|: 8 ulps of the size of the terms summed,
         which can be 10⁴ times the value where they cancel (a loop stretched by shear).  A floor of
         the value's precision that more points do not lower, so not part of ``resolution``
+    reason : why a set is under-resolved where its spectrum cannot say (a coordinate that jumps by
+        more than half its extent between neighbours: a wrapped angle given no ``period``); "" else
     """
 
     value: float
@@ -59,17 +68,82 @@ class InvariantValue:
     under_resolved: bool
     error: float = 0.0
     roundoff: float = 0.0
+    reason: str = ""
 
     def __float__(self):
         return self.value
 
 
-def _value(value, error, roundoff, tail):
-    """The InvariantValue of a value with its error estimate, its round-off and its set's relative tail."""
+def _value(value, error, roundoff, tail, reason=""):
+    """The InvariantValue of a value with its error estimate, its round-off and its set's relative tail
+    (a ``reason`` makes it under-resolved whatever the spectra say: resolution 1)."""
     value = float(value)
-    res = max(spectral.relative(error, value), tail)
+    res = max(spectral.relative(error, value), tail, 1.0 if reason else 0.0)
     return InvariantValue(value, float(res), bool(res > UNDER_RESOLVED), float(error + roundoff),
-                          float(spectral.relative(roundoff, value)))
+                          float(spectral.relative(roundoff, value)), reason)
+
+
+def _periods(period, d):
+    """``period`` as (d,) floats, 0 where a coordinate is not periodic; None when none is."""
+    if period is None:
+        return None
+    if np.ndim(period) == 0:
+        period = [period] * d
+    period = list(period)
+    if len(period) != d:
+        raise ValueError(f"period must be a number or one entry per coordinate ({d}), got {len(period)} entries")
+    P = np.zeros(d)
+    for i, x in enumerate(period):
+        x = 0.0 if x is None else x
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(x) or x < 0:
+            raise ValueError(f"period of coordinate {i} must be a positive number, or None or 0 where the "
+                             f"coordinate is not periodic, got {x!r}")
+        P[i] = float(x)
+    return P if P.any() else None
+
+
+def _unwrap(q, P, axis):
+    """q with each periodic coordinate's differences along ``axis`` taken into [−P/2, P/2)
+    (the first sample stays where it is)."""
+    out = q.copy()
+    j = np.flatnonzero(P)
+    x = np.take(q[..., j], np.arange(q.shape[axis]), axis=axis)
+    dx = np.diff(x, axis=axis)
+    Pj = P[j]
+    dx = dx - Pj * np.floor(dx / Pj + 0.5)
+    first = np.take(x, [0], axis=axis)
+    out[..., j] = np.concatenate([first, first + np.cumsum(dx, axis=axis)], axis=axis)
+    return out
+
+
+def _jumps(q, P, axes, closed):
+    """The reason a set whose coordinates jump by more than half their extent between neighbours
+    (along ``axes``; a loop ``closed``: its last point is the first's neighbour) cannot be
+    trusted, or "".  Periodic coordinates (P > 0) are unwrapped already and are left out."""
+    extent = np.max(q, axis=tuple(range(q.ndim - 1))) - np.min(q, axis=tuple(range(q.ndim - 1)))
+    for axis in axes:
+        x = np.concatenate([q, np.take(q, [0], axis=axis)], axis=axis) if closed else q
+        big = np.max(np.abs(np.diff(x, axis=axis)), axis=tuple(a for a in range(q.ndim - 1)))
+        bad = np.flatnonzero((big > 0.5 * extent) & (extent > 0) & (P == 0 if P is not None else True))
+        if bad.size:
+            i = int(bad[0])
+            return (f"coordinate {i} jumps by {big[i]:.3g} between neighbouring samples, more than half its extent "
+                    f"{extent[i]:.3g}: a wrapped angle? give its period (period=…)")
+    return ""
+
+
+def _check_periodic(A_of, q, P, what):
+    """Refuse a one-form (or two-form) that is not periodic where the coordinates are: its values
+    at q and at q shifted by every period at once must agree to round-off."""
+    A0, A1 = A_of(q), A_of(q + P)
+    scale = np.max(np.abs(A0)) if A0.size else 0.0
+    diff = np.max(np.abs(A1 - A0)) if A0.size else 0.0
+    if diff > 1e-10 * max(scale, 1e-300):
+        i = [int(x) for x in np.flatnonzero(P)]
+        raise ValueError(f"the {what} is not periodic in coordinate{'s' if len(i) > 1 else ''} "
+                         f"{', '.join(map(str, i))} (period {', '.join(f'{P[k]:g}' for k in i)}): its values change "
+                         f"by {diff:.3g} (relative {diff / max(scale, 1e-300):.2g}) under a shift by the period")
 
 
 MIN_POINTS = 8           # the fewest points along a direction of a sample set
@@ -132,34 +206,66 @@ def one_form_coefficients(q, form, system=None, p=None, lam=None, h=None):
     return w, -h * w
 
 
-def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None) -> InvariantValue:
+def first_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None, period=None) -> InvariantValue:
     """I₁ = ∮ A(q) dq/dτ dτ over a loop q (N, d) sampled at τ_j = j/N: the trapezoidal rule of A·(spectral
-    dq/dτ), evaluated in Fourier space by Parseval (spectral.loop_pairing).
+    dq/dτ), evaluated in Fourier space by Parseval (spectral.loop_pairing).  Canonical: ∮ p·dq (not
+    divided by 2π).
 
     form : 'noncanonical' (needs system), 'canonical' (needs p), 'corrected' (needs system, lam, h),
         or a callable ϑ(q) -> (N, d): the coefficients of a one-form of your own
+    period : periodic coordinates: a number (every coordinate) or one entry per coordinate (None or 0
+        where not periodic).  The loop's samples may be wrapped; neighbours' differences are unwrapped
+        and a loop winding m times around coordinate i adds m·P_i·mean(A_i).  A one-form that is not
+        periodic there is refused.  Without a period, a coordinate that jumps by more than half its
+        extent between neighbours makes the value under-resolved, with ``reason`` saying so.
     """
-    return first_invariants(q, [form], system, p, lam, h)[form]
+    return first_invariants(q, [form], system, p, lam, h, period)[form]
 
 
-def first_invariants(q, forms, system=None, p=None, lam=None, h=None) -> dict:
+def _winding(q, P):
+    """(r, ramp): a loop's samples with periodic coordinates unwrapped, less the linear part m·P·τ of
+    a coordinate that winds m times (r is periodic in τ), and the (d,) m·P."""
+    n = q.shape[0]
+    qu = _unwrap(q, P, 0)
+    close = q[0] - qu[-1]
+    close = np.where(P > 0, close - P * np.floor(close / np.where(P > 0, P, 1.0) + 0.5), 0.0)
+    total = qu[-1] + close - qu[0]
+    m = np.where(P > 0, np.round(total / np.where(P > 0, P, 1.0)), 0.0)
+    ramp = m * P
+    tau = np.arange(n) / n
+    return qu - tau[:, None] * ramp, ramp
+
+
+def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=None) -> dict:
     """{form: I₁} for several forms of one loop, sharing q's Fourier coefficients and resolution
-    monitor; each value is bitwise what it is alone."""
+    monitor; each value is bitwise what it is alone.  ``period``: as :func:`first_invariant`."""
     q = _check(q, 2, "loop q")
-    qh = spectral.fourier_coefficients(q)
-    tail_q = spectral.loop_tail(q, qh)
+    P = _periods(period, q.shape[1])
+    r, ramp = (q, None) if P is None else _winding(q, P)
+    reason = _jumps(r, P, (0,), closed=True)
+    qh = spectral.fourier_coefficients(r)
+    tail_q = spectral.loop_tail(r, qh)
     half = q.shape[0] % 2 == 0 and q.shape[0] // 2 >= MIN_POINTS    # the every-other-point subset
     qh2 = None
     out = {}
     for form in forms:
         A, Al = one_form_coefficients(q, form, system, p, lam, h)
+        if P is not None and form != "canonical":
+            _check_periodic(lambda x: one_form_coefficients(x, form, system, p, lam, h)[0], q, P, "one-form")
         ah = spectral.fourier_coefficients(A)
-        value = spectral.loop_pairing(A, q, bh=qh, ah=ah)        # in Fourier space (Parseval)
+        value = spectral.loop_pairing(A, r, bh=qh, ah=ah)        # in Fourier space (Parseval)
         error, roundoff = spectral.loop_pairing_error(ah, qh, q.shape[0])
+        if ramp is not None and ramp.any():                    # the winding: ∮ A_i m P_i dτ, A's mean
+            wind = np.abs(ramp) * np.max(np.abs(A), axis=0)
+            value += np.sum(ramp * np.mean(A, axis=0))
+            error += spectral.loop_tail(A, ah) * np.sum(wind)
+            roundoff += 8 * EPS * np.sum(wind)
         check = half and error > SUBSET_BELOW * abs(float(value))     # the subset's value, where it can matter
         if check:
-            qh2 = spectral.fourier_coefficients(q[::2]) if qh2 is None else qh2
-            value2 = spectral.loop_pairing(A[::2], q[::2], bh=qh2)
+            qh2 = spectral.fourier_coefficients(r[::2]) if qh2 is None else qh2
+            value2 = spectral.loop_pairing(A[::2], r[::2], bh=qh2)
+            if ramp is not None and ramp.any():
+                value2 += np.sum(ramp * np.mean(A[::2], axis=0))
         res = tail_q
         if Al is not None:
             alh, lh = spectral.fourier_coefficients(Al), spectral.fourier_coefficients(lam)
@@ -168,12 +274,12 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None) -> dict:
             error, roundoff = error + e2, roundoff + r2
             if check:
                 value2 += spectral.loop_pairing(Al[::2], lam[::2])
-            res = spectral.loop_tail(np.concatenate([q, h * lam], axis=-1))   # hλ has the units of q
+            res = spectral.loop_tail(np.concatenate([r, h * lam], axis=-1))   # hλ has the units of q
         if check:             # two estimates that err large: the smaller is the sharper, and still errs large
             error = min(error, abs(float(value) - float(value2)))
         if form == "canonical":
             res = max(res, spectral.loop_tail(p, ah))
-        out[form] = _value(value, error, roundoff, res)
+        out[form] = _value(value, error, roundoff, res, reason)
     return out
 
 
@@ -245,17 +351,20 @@ def _compiled_integrands(system, q, lam, qs, qt, ls, lt, h, paper_sign, correcte
 
 
 def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=None,
-                     paper_sign=False) -> InvariantValue:
+                     paper_sign=False, period=None) -> InvariantValue:
     """I₂ = ∫∫ Ω_ab x_σ^a x_τ^b dσ dτ over a surface q (n_σ, n_τ, d) at Chebyshev points.
 
     form : 'noncanonical' (Ω̄(q), needs system), 'canonical' (∫∫ p_σ·q_τ − p_τ·q_σ, needs p),
     'corrected' (dϑ_λ on (q, λ), needs system, lam, h), or a callable Ω(q) -> (n_σ, n_τ, d, d):
     the matrix of a two-form ½Ω_ab dq^a ∧ dq^b of your own.
+    period : periodic coordinates, as for :func:`first_invariant`: the samples may be wrapped; the
+        differences between neighbours along σ and τ are unwrapped before the derivatives, and a
+        two-form that is not periodic there is refused.
     """
-    return second_invariants(q, [form], system, p, lam, h, paper_sign)[form]
+    return second_invariants(q, [form], system, p, lam, h, paper_sign, period)[form]
 
 
-def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sign=False) -> dict:
+def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sign=False, period=None) -> dict:
     """{form: I₂} for several forms of one surface, sharing what they share: the transforms and
     derivatives of q, and ϑ_q, ϑ_qq from one compiled pass over the points for noncanonical and
     corrected together.  Each form's value is bitwise what it is alone (tests/test_invariants.py)."""
@@ -265,8 +374,17 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
         if not callable(form) and form not in FORMS:
             raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
     named = [f for f in forms if not callable(f)]
-    cq0 = spectral.chebyshev_coefficients(q, 0)
-    qs, qt = spectral.chebyshev_derivative(q, 0, cq0), spectral.chebyshev_derivative(q, 1)
+    P = _periods(period, d)
+    qu = q if P is None else _unwrap(_unwrap(q, P, 1), P, 0)    # along τ, then σ: the patch in one sheet
+    reason = _jumps(qu, P, (0, 1), closed=False)
+    if P is not None:
+        for form in forms:
+            if callable(form):
+                _check_periodic(lambda x: _user_values(form, x, x.shape + (d,), "two-form"), q, P, "two-form")
+            elif form != "canonical":
+                _check_periodic(_need(system, "system", form).Omega, q, P, "two-form Ω̄ of the system")
+    cq0 = spectral.chebyshev_coefficients(qu, 0)
+    qs, qt = spectral.chebyshev_derivative(qu, 0, cq0), spectral.chebyshev_derivative(qu, 1)
     cq2 = np.abs(spectral.chebyshev_coefficients(cq0, 1))
     tail_q = spectral.coefficient_tail(cq2)
     out, omega = {}, {}
@@ -306,7 +424,7 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
             hl2 = np.abs(h * spectral.chebyshev_coefficients(cl0, 1))      # λ's coefficients, scaled
             res = spectral.coefficient_tail(np.concatenate([cq2, hl2], axis=-1))   # hλ has the units of q
         out[form] = _value(spectral.surface_integral(integrand), spectral.surface_quadrature_error(integrand),
-                           spectral.surface_roundoff(integrand), res)
+                           spectral.surface_roundoff(integrand), res, reason)
     return out
 
 
@@ -328,13 +446,13 @@ class InvariantSeries:
         return ~(self.resolution <= UNDER_RESOLVED)
 
 
-def along(solution, form="noncanonical", system=None) -> InvariantSeries:
+def along(solution, form="noncanonical", system=None, period=None) -> InvariantSeries:
     """The invariant of a sample set at every saved time of an ``integrators.integrate`` solution.
 
     The set's shape travels with the points: integrate a loop (N, d) and get I₁, a surface
     (n_σ, n_τ, d) and get I₂ (``integrate`` keeps the leading shape of q0).  ``form`` as for
     :func:`first_invariant` / :func:`second_invariant`, a user callable included; p, λ and h come
-    from the solution.
+    from the solution; ``period`` as for :func:`first_invariant`.
     """
     q = np.asarray(solution.q)
     if q.ndim == 3:
@@ -351,6 +469,6 @@ def along(solution, form="noncanonical", system=None) -> InvariantSeries:
         broken = np.isfinite(solution.breakdown_time) & (solution.breakdown_time <= solution.t[k])
         if np.any(broken):
             continue
-        v = fn(q[k], form, system=system, p=solution.p[k], lam=solution.lam[k], h=solution.h)
+        v = fn(q[k], form, system=system, p=solution.p[k], lam=solution.lam[k], h=solution.h, period=period)
         vals[k], res[k] = v.value, v.resolution
     return InvariantSeries(np.asarray(solution.t), vals, res)
