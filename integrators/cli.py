@@ -2,6 +2,7 @@
 
     poincare run [SCENE] [-o OUT] [--resume] [--force]     (mpiexec -n K poincare run … to distribute)
     poincare audit CANDIDATE [--projection P …] [--scene SCENE] [--reference TAB-PROJ …] [--json F] [--plots DIR]
+    poincare audit --map MAP … [--point P] [--h H] [--steps N] [--period P …] [--loop-points N] [--json F] [--plots DIR]
     poincare scenes [--keys]
     poincare plot OUT.h5 [-o DIR]
     poincare list tableaus|systems
@@ -319,10 +320,78 @@ def _print_user_code():
             print(f"  {what} = {_printable(spec)}: {_printable(where)}")
 
 
+def _map_audit(args):
+    """``poincare audit --map``: canonical black-box maps by integrators.audit.audit_map."""
+    from .audit import examples
+    from .audit.maps import audit_map
+    from .service.plugins import load_callable
+    if args.candidate is not None:
+        raise ValueError("give either a CANDIDATE (tableau or step(q, p, lam, h, system) map on a scene) or --map, "
+                         "not both")
+    for name in ("projection",):
+        if getattr(args, name) is not None:
+            raise ValueError(f"--{name} applies to tableaus, not to --map")
+    maps, info = {}, None
+    for spec in args.map:
+        if spec in examples.EXAMPLES:
+            step, info_k = examples.example(spec, args.k)
+            info = info or info_k
+        else:
+            step = load_callable(spec, "step map", confined=False)
+        maps[spec] = step
+    if args.point is not None:
+        point = _read_point(args.point)
+    elif info is not None:
+        point = info["point"]
+    else:
+        raise ValueError("--map of your own needs --point: a .npz file with arrays x0 and v0, or file.py:function "
+                         "returning (x0, v0)")
+    period = args.period if args.period is not None else (None if info is None else [info["period"]])
+    if period is not None and len(period) == 1:
+        period = period[0]
+    h = args.h if args.h is not None else (None if info is None else info["h"])
+    if h is None:
+        raise ValueError("--map of your own needs --h, the step size")
+    kw = dict(steps=args.steps if args.steps is not None else 100, loop_points=args.loop_points,
+              radius=args.radius, plane=args.plane, surface=args.surface, period=period,
+              defect_points=args.points, levels=args.levels if args.levels is not None else 3, probes=args.probes)
+    if args.output_every is not None:
+        kw["output_every"] = args.output_every
+    say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    return audit_map(maps, point, h, progress=say, **kw)
+
+
+def _read_point(spec):
+    """(x0, v0) from a .npz file (arrays x0, v0) or a file.py:function returning them."""
+    import numpy as np
+    from .service.plugins import is_spec, load_callable
+    if spec.endswith(".npz"):
+        try:
+            with np.load(spec) as f:
+                return np.asarray(f["x0"], dtype=float), np.asarray(f["v0"], dtype=float)
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"--point '{spec}': cannot read arrays x0 and v0 ({type(exc).__name__}: {exc})") from None
+    if is_spec(spec):
+        got = load_callable(spec, "--point", confined=False)()
+        if not isinstance(got, (tuple, list)) or len(got) != 2:
+            raise ValueError(f"--point '{spec}' must return (x0, v0)")
+        return got
+    raise ValueError(f"--point must be a .npz file with arrays x0 and v0, or file.py:function, got '{spec}'")
+
+
 def cmd_audit(args) -> int:
     import json
     from . import audit
     from .service.scene import load_scene
+    if args.map:
+        _check_writable(args.json, "--json", file=True)
+        _check_writable(args.plots, "--plots", file=False)
+        return _audit_outputs(_map_audit(args), args)
+    if args.candidate is None:
+        raise ValueError("give a CANDIDATE (a tableau, or a step(q, p, lam, h, system) map with --scene), or "
+                         "--map for a canonical step(x, v, h) map")
+    if args.levels is None:
+        args.levels = 5
     scene = load_scene(args.scene)
     if args.steps is not None:
         if args.steps < 1:
@@ -343,6 +412,13 @@ def cmd_audit(args) -> int:
     _check_writable(args.plots, "--plots", file=False)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     report = audit.audit(cands, scene, references=refs, defect_points=args.points, levels=args.levels, progress=say)
+    return _audit_outputs(report, args)
+
+
+def _audit_outputs(report, args) -> int:
+    """The text report on stdout, and the JSON and plots asked for."""
+    import json
+    from . import audit
     print(audit.text_report(report))
     if args.json:
         with open(args.json, "w") as fh:
@@ -352,6 +428,9 @@ def cmd_audit(args) -> int:
         for path in audit.plot_report(report, args.plots):
             print(f"wrote {path}")
     return 0
+
+
+_EXAMPLE_NAMES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2")   # audit.examples.EXAMPLES
 
 
 def _check_writable(path, option, file):
@@ -435,7 +514,7 @@ def build_parser():
                                     "TOML file, with each projection it admits) or a batched step map "
                                     "module:function / file.py:function with signature "
                                     "step(q, p, lam, h, system) -> (q, p, lam). Thresholds: docs/audit.md.")
-    au.add_argument("candidate", help="built-in tableau, tableau .toml file, or module:function")
+    au.add_argument("candidate", nargs="?", help="built-in tableau, tableau .toml file, or module:function")
     au.add_argument("--projection", nargs="+", default=None,
                     help="projections to audit a tableau with (default: every one it admits)")
     au.add_argument("--scene", default="point_vortices",
@@ -445,7 +524,28 @@ def build_parser():
     au.add_argument("--reference", nargs="+", default=["GLRK2-symmetric", "GLRK2-standard"],
                     help="built-in pairs run side by side ('none' for no references)")
     au.add_argument("--points", type=int, default=4, help="sample points of the one-step defect")
-    au.add_argument("--levels", type=int, default=5, help="step sizes h, h/2, … of the defect study")
+    au.add_argument("--levels", type=int, default=None,
+                    help="step sizes h, h/2, … of the defect study (default 5; 3 with --map)")
+    mp = au.add_argument_group("canonical step maps in any dimension (docs/audit.md, 'Step maps in any dimension')")
+    mp.add_argument("--map", nargs="+", metavar="MAP",
+                    help="canonical maps step(x, v, h) -> (x, v) on (n, k) arrays: file.py:function, "
+                         "module:function, or a shipped example (" + ", ".join(_EXAMPLE_NAMES) + ")")
+    mp.add_argument("--point", help="the phase-space point (x0, v0) the sets are built around: a .npz file with "
+                                    "arrays x0 and v0, or file.py:function returning them (examples: their own)")
+    mp.add_argument("--k", type=int, default=None,
+                    help="size of a shipped example: pendula (default 1024) or particles (default 10000)")
+    mp.add_argument("--h", type=float, default=None, help="step size (examples: theirs)")
+    mp.add_argument("--period", type=float, nargs="+", default=None,
+                    help="period of the positions: one number for all, or one per coordinate (0: not periodic)")
+    mp.add_argument("--loop-points", type=int, default=1024, help="points of the loop (default 1024)")
+    mp.add_argument("--radius", type=float, default=0.1, help="radius of the loop in phase space (default 0.1)")
+    mp.add_argument("--plane", type=int, nargs=2, default=None, metavar=("I", "J"),
+                    help="phase-space coordinates (x_0 … x_{k-1}, v_0 … v_{k-1}) the loop turns in "
+                         "(default: all x against all v)")
+    mp.add_argument("--surface", type=int, nargs=2, default=None, metavar=("NS", "NT"),
+                    help="also a surface of NS × NT Chebyshev points in the same plane (I₂)")
+    mp.add_argument("--probes", type=int, default=8, help="probe pairs of the matrix-free defect (default 8)")
+    mp.add_argument("--output-every", type=int, default=None, help="steps between invariant outputs (default steps/50)")
     au.add_argument("--json", help="write the full report as JSON")
     au.add_argument("--plots", help="directory for the PNG plots")
     au.add_argument("-q", "--quiet", action="store_true", help="no progress messages")

@@ -1,4 +1,5 @@
 """A user's own system and tableau, written only in a scene file, run like a built-in one."""
+import re
 import shutil
 import subprocess
 import sys
@@ -256,3 +257,15 @@ def test_a_missing_step_map_is_a_one_line_error(tmp_path):
                                            'projections = ["symmetric"]\nstep_maps = ["nothere.py:rk4"]'))
     with pytest.raises(SceneError, match=r"run\.step_maps.*nothere\.py"):
         parse_scene(scene.read_text(), origin=str(scene))
+
+
+def test_a_scene_of_step_maps_only(tmp_path):
+    """run.tableaus = [] (and projections = []) beside run.step_maps is a scene of maps only, not
+    'run.tableaus must be a non-empty list' (issue 53); without step maps the empty list is refused."""
+    (tmp_path / "mymaps.py").write_text(MAPS)
+    text = re.sub(r'(?m)^tableaus = .*$', 'tableaus = []', SCENE)
+    text = re.sub(r'(?m)^projections = .*$', 'projections = []\nstep_maps = ["mymaps.py:rk4"]', text)
+    scene = parse_scene(text, str(tmp_path / "s.toml"))
+    assert [p.label for p in scene.pairs] == ["rk4"]
+    with pytest.raises(SceneError, match="non-empty list"):
+        parse_scene(re.sub(r'(?m)^tableaus = .*$', 'tableaus = []', SCENE), str(tmp_path / "s.toml"))

@@ -46,6 +46,10 @@ Two measurements (docs/audit.md has the thresholds and the table for the built-i
 
   for h, h/2, h/4, …; the order p of defect ∝ h^p is fitted over the values above the floor.
 
+* **Canonical maps in any dimension** (:func:`audit_map`, :mod:`.maps`): ``step(x, v, h) -> (x, v)``
+  with nothing symbolic, the defect matrix-free (random probe pairs, two Jacobian–vector products
+  each) and periodic positions; shipped examples in :mod:`.examples` (pendulum arrays, 1-D PIC).
+
 * **Whether the scene can tell at all** (:func:`discrimination`): where even maps that are not
   symplectic in general (the standard projection of GLRK1, GLRK2) keep Ω̄ to the defect floor, the
   report opens with a one-line warning instead of letting "symplectic" read as a finding.
@@ -57,8 +61,9 @@ from .defect import DEFECT_FLOOR, FD_ORDER8, FD_STEP, READ_THRESHOLD, defect_stu
 from .discrimination import discrimination
 from .drift import RESOLVED, ROUNDOFF, VERDICTS, drift_verdict, run_drift
 from .report import audit, plot_report, text_report
+from .maps import audit_map, jvp, map_defect
 
 __all__ = ["Candidate", "candidates_from", "load_function", "pair_candidate", "stepper_map", "DEFECT_FLOOR",
            "FD_ORDER8", "FD_STEP", "READ_THRESHOLD", "defect_study", "defects", "fit_order", "jacobian",
            "VERDICTS", "RESOLVED", "ROUNDOFF", "discrimination", "drift_verdict", "run_drift", "audit", "plot_report",
-           "text_report"]
+           "text_report", "audit_map", "jvp", "map_defect"]

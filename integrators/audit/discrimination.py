@@ -43,7 +43,7 @@ def discrimination(system, points, h, npoints=4):
     if np.all(TT == 0.0):
         why = " (ϑ is linear in q, so Ω̄ is constant)"
     names = " and ".join(f"{t}-{p}" for t, p in PROBES)
-    return (f"this scene cannot tell symplectic methods from others{why}: {names}, not symplectic in "
+    return (f"this scene cannot tell symplectic projections from others{why}: {names}, not symplectic in "
             f"general, keep Ω̄ to a relative one-step defect of {worst:.0e} here (floor {floor:g}) at h = {h:g}; "
-            "a 'symplectic' or 'round-off' verdict on it is no finding (point vortices and the tokamak field "
-            "show the defects)")
+            "a 'symplectic' or 'round-off' verdict of a projected method on it is no finding (point vortices and "
+            "the tokamak field show the defects); maps of other kinds are still told apart")

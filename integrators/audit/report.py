@@ -30,7 +30,8 @@ def audit(candidates, scene, *, references=(), defect_points=4, levels=5, method
                                                          "resolved": RESOLVED,
                                                          "defect_floor": DEFECT_FLOOR},
               "defect_points": qd.tolist(), "candidates": [],
-              "discrimination": discrimination(system, pts, scene.h)}
+              "discrimination": discrimination(system, pts, scene.h)       # a warning about projected methods:
+              if any(c.kind == "pair" for c in list(candidates) + list(references)) else None}   # only with one
     for cand, role in [(c, "candidate") for c in candidates] + [(c, "reference") for c in references]:
         entry = {"name": cand.name, "role": role, "kind": cand.kind, "breakdown_step": None, "drift": {},
                  "t": [], "errors": {}, "defect": {}, "jacobian": None}

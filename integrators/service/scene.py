@@ -564,6 +564,8 @@ def _pairs_of(run, base):
                 raise SceneError(f"run.step_maps: '{m}' must be module:function or file.py:function")
         if len({step_map_label(m) for m in maps}) != len(maps):
             raise SceneError("'run.step_maps' lists two functions of the same name")
+    if maps and run.get("tableaus") == [] and run.get("projections", []) == []:
+        run = {k: v for k, v in run.items() if k not in ("tableaus", "projections")}   # step maps only
     tabs, tableau_files = _tableaus(run["tableaus"], base) if "tableaus" in run else ((), {})
     projs = _names(run["projections"], PROJECTIONS, "run.projections") if "projections" in run else ()
     if bool(tabs) != bool(projs):

@@ -1,0 +1,184 @@
+"""Step maps of high-dimensional systems whose Hamiltonian is code, for :func:`integrators.audit.audit_map`
+and ``poincare audit --map`` (docs/audit.md, "Step maps in any dimension").
+
+Each factory returns ``step(x, v, h) -> (x, v)`` on (n, k) arrays, written with plain arithmetic so
+that complex arguments pass through (the audit then differentiates by complex step), and a
+dictionary of what it is.  Positions are angles or particle positions on a periodic domain and are
+returned wrapped into [0, P): the audit is told the period.
+
+* :func:`pendulum_array`: k pendula on a ring, H = Σ v²/2 + Σ (1 − cos x_i) + c Σ (1 − cos(x_{i+1} − x_i)),
+  by Strang splitting (kick–drift–kick: symplectic) or by the explicit midpoint rule RK2 (not).
+* :func:`pic`: a 1-D electrostatic particle-in-cell step of N electrons on a periodic domain of
+  length L with a neutralising background: B-spline shape functions of degree 1 or 3 on M cells,
+  the field's energy ½ Σ_m ρ_m φ_m Δ with −φ'' = ρ solved spectrally, and the force on a particle
+  the exact gradient of that energy (the charge's shape function differentiated), so that the
+  splitting is symplectic; RK2 on the same force is not.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+def _wrap(x, period):
+    """x into [0, period), by the real part (complex-step safe: the imaginary part rides along)."""
+    return x - period * np.floor(np.real(x) / period)
+
+
+def _integrator(accel, period, method):
+    """step(x, v, h) of ẍ = accel(x): Strang splitting (kick ½h, drift h, kick ½h: symplectic) or the
+    explicit midpoint rule RK2 (not); positions wrapped into [0, period)."""
+    if method == "strang":
+        def step(x, v, h):
+            v = v + 0.5 * h * accel(x)
+            x = x + h * v
+            v = v + 0.5 * h * accel(x)
+            return _wrap(x, period), v
+    else:
+        def step(x, v, h):
+            xm = x + 0.5 * h * v
+            vm = v + 0.5 * h * accel(x)
+            return _wrap(x + h * vm, period), v + h * accel(xm)
+    return step
+
+
+def pendulum_array(k=1024, coupling=0.5, method="strang"):
+    """A ring of k coupled pendula (positions: angles, period 2π): (step, info)."""
+    if method not in ("strang", "rk2"):
+        raise ValueError(f"method must be 'strang' or 'rk2', got {method!r}")
+    c = float(coupling)
+
+    def force(x):
+        right = np.roll(x, -1, axis=1) - x
+        left = x - np.roll(x, 1, axis=1)
+        return -np.sin(x) + c * (np.sin(right) - np.sin(left))
+
+    step = _integrator(force, TWO_PI, method)
+
+    def energy(x, v):
+        right = np.roll(x, -1, axis=-1) - x
+        return np.sum(0.5 * v * v + (1 - np.cos(x)) + c * (1 - np.cos(right)), axis=-1)
+
+    step.__name__ = f"pendula_{method}"
+    return step, dict(k=k, period=TWO_PI, energy=energy, method=method,
+                      what=f"{k} pendula on a ring, coupling {c:g}, {'Strang splitting' if method == 'strang' else 'RK2'}")
+
+
+def _bspline(t, degree):
+    """The centred cardinal B-spline of ``degree`` (1 or 3) and its derivative at t (any shape)."""
+    a = np.abs(np.real(t))
+    s = np.where(np.real(t) < 0, -1.0, 1.0)
+    u = s * t                               # |t| with the imaginary part carried (complex step)
+    if degree == 1:
+        inside = a < 1
+        return np.where(inside, 1 - u, 0.0), np.where(inside, -s, 0.0)
+    one, two = a < 1, (a >= 1) & (a < 2)
+    S = np.where(one, 2 / 3 - u * u + 0.5 * u ** 3, np.where(two, (2 - u) ** 3 / 6, 0.0))
+    dS = np.where(one, s * (-2 * u + 1.5 * u * u), np.where(two, -s * 0.5 * (2 - u) ** 2, 0.0))
+    return S, dS
+
+
+def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"):
+    """A 1-D electrostatic PIC step (electrons, charge −1 and mass 1 in total, ions a fixed background):
+    (step, info).  Positions on [0, L) (period L); ``degree`` 1 or 3; ``method`` 'strang' or 'rk2'."""
+    if degree not in (1, 3):
+        raise ValueError(f"degree must be 1 or 3, got {degree!r}")
+    if method not in ("strang", "rk2"):
+        raise ValueError(f"method must be 'strang' or 'rk2', got {method!r}")
+    N, M, L = int(particles), int(cells), float(length)
+    dx = L / M
+    X = np.arange(M) * dx
+    q_p = -L / N                          # charge per particle: total −L against a background of +1
+    kk = TWO_PI * np.fft.rfftfreq(M, d=dx)
+    inv_k2 = np.zeros_like(kk)
+    inv_k2[1:] = 1.0 / kk[1:] ** 2
+    reach = 1 if degree == 1 else 2       # cells a shape function touches on each side
+
+    def _offsets(x):
+        """Per particle: the nearest-below node index j and the offsets t = (x − X_m)/Δ to the nodes
+        j − reach + 1 … j + reach (its support), as (..., 2·reach)."""
+        j = np.floor(np.real(x) / dx).astype(np.int64)
+        m = j[..., None] + np.arange(-reach + 1, reach + 1)
+        t = x[..., None] / dx - m                     # before the nodes are wrapped
+        return m % M, t
+
+    def _deposit(x):
+        """The electrons' charge density at the nodes for each row of positions x (n, N): (n, M)."""
+        m, t = _offsets(x)
+        S, _ = _bspline(t, degree)
+        n = x.shape[0]
+        idx = (np.arange(n)[:, None, None] * M + m).ravel()
+        w = (q_p / dx) * S.ravel()
+        count = lambda wr: np.bincount(idx, weights=wr, minlength=n * M).reshape(n, M)
+        return count(w.real) + 1j * count(w.imag) if np.iscomplexobj(w) else count(w)
+
+    def potential(x):
+        """φ at the nodes for each row of particle positions x (n, N): (n, M)."""
+        rho = _deposit(x) + 1.0                       # the ions' background
+        solve = lambda r: np.fft.irfft(np.fft.rfft(r, axis=1) * inv_k2, n=M, axis=1)   # −φ'' = ρ, mean zero
+        if np.iscomplexobj(rho):                      # complex step: the (linear) solve of each part
+            return solve(rho.real) + 1j * solve(rho.imag)
+        return solve(rho)
+
+    def accel(x):
+        """−(1/m_p) ∂W/∂x_j with W = ½ Σ ρ_m φ_m Δ: the exact gradient of the field energy (n, N)."""
+        phi = potential(x)
+        m, t = _offsets(x)
+        _, dS = _bspline(t, degree)
+        phim = np.take_along_axis(np.broadcast_to(phi[:, None, :], m.shape[:2] + (M,)), m, axis=2)
+        # ∂ρ_m/∂x_j = q_p S'((x_j − X_m)/Δ)/Δ², force −Δ Σ_m φ_m ∂ρ_m/∂x_j; mass m_p = −q_p (q/m = −1)
+        return np.sum(phim * dS, axis=-1) / dx
+
+    step = _integrator(accel, L, method)
+
+    def energy(x, v):
+        x2 = np.atleast_2d(x)
+        phi = potential(x2)
+        rho = _deposit(x2) + 1.0
+        field = 0.5 * dx * np.sum(rho * phi, axis=-1)
+        return (-q_p) * 0.5 * np.sum(np.atleast_2d(v) ** 2, axis=-1) + field
+
+    def landau(alpha=0.01, mode=1, seed=1):
+        """A Landau-damping initial point (x0, v0): x quiet-started with density 1 + α cos(k x),
+        k = 2π·mode/L, v Maxwellian (unit thermal speed) from numpy's generator of ``seed``."""
+        rng = np.random.default_rng(seed)
+        kx = TWO_PI * mode / L
+        u = (np.arange(N) + 0.5) / N * L
+        x = u - alpha / kx * np.sin(kx * u)           # inverse of the cumulative density, to first order
+        return _wrap(x, L), rng.standard_normal(N)
+
+    step.__name__ = f"pic_{method}_deg{degree}"
+    return step, dict(k=N, period=L, energy=energy, landau=landau, method=method, degree=degree,
+                      what=f"1-D electrostatic PIC, {N} particles, {M} cells, B-splines of degree {degree}, "
+                           f"{'Strang splitting' if method == 'strang' else 'RK2'}")
+
+
+EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2")
+
+
+def example(name, k=None):
+    """A shipped example by name (:data:`EXAMPLES`): (step, info) with info's ``point`` (x0, v0), ``h``
+    and ``period`` the audit's defaults.  ``k``: pendula (default 1,024) or particles (default 10,000).
+
+    pendula: angles uniform in [0, 2π) and momenta normal with deviation 0.5 (numpy's generator of
+    seed 1), h = 0.1.  pic (cubic B-splines) and pic1 (linear): 64 cells on [0, 4π), a Landau-damping
+    start (α = 0.01, mode 1), h = 0.1."""
+    if name not in EXAMPLES:
+        raise ValueError(f"unknown example '{name}' (choose one of {', '.join(EXAMPLES)})")
+    family, method = name.split("-")
+    if k is not None and (int(k) != k or k < 1):
+        raise ValueError(f"--k must be a positive whole number, got {k}")
+    if family == "pendula":
+        k = 1024 if k is None else int(k)
+        step, info = pendulum_array(k, method=method)
+        rng = np.random.default_rng(1)
+        info["point"] = (rng.uniform(0.0, TWO_PI, k), 0.5 * rng.standard_normal(k))
+    else:
+        k = 10000 if k is None else int(k)
+        step, info = pic(particles=k, degree=3 if family == "pic" else 1, method=method)
+        info["point"] = info["landau"]()
+    info["h"] = 0.1
+    return step, info
