@@ -352,8 +352,9 @@ def _map_audit(args):
     h = args.h if args.h is not None else (None if info is None else info["h"])
     if h is None:
         raise ValueError("--map of your own needs --h, the step size")
+    radius = args.radius if args.radius is not None else (0.1 if info is None else info["radius"])
     kw = dict(steps=args.steps if args.steps is not None else 100, loop_points=args.loop_points,
-              radius=args.radius, plane=args.plane, surface=args.surface, period=period,
+              radius=radius, plane=args.plane, surface=args.surface, period=period,
               defect_points=args.points, levels=args.levels if args.levels is not None else 3, probes=args.probes)
     if args.output_every is not None:
         kw["output_every"] = args.output_every
@@ -538,7 +539,8 @@ def build_parser():
     mp.add_argument("--period", type=float, nargs="+", default=None,
                     help="period of the positions: one number for all, or one per coordinate (0: not periodic)")
     mp.add_argument("--loop-points", type=int, default=1024, help="points of the loop (default 1024)")
-    mp.add_argument("--radius", type=float, default=0.1, help="radius of the loop in phase space (default 0.1)")
+    mp.add_argument("--radius", type=float, default=None,
+                    help="radius of the loop in phase space (default 0.1; the examples' own: pendula 0.01)")
     mp.add_argument("--plane", type=int, nargs=2, default=None, metavar=("I", "J"),
                     help="phase-space coordinates (x_0 … x_{k-1}, v_0 … v_{k-1}) the loop turns in "
                          "(default: all x against all v)")

@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 TWO_PI = 2.0 * math.pi
+ROWS = 16             # rows (sample points) of the PIC map's arrays handled at once
 
 
 def _wrap(x, period):
@@ -67,20 +68,6 @@ def pendulum_array(k=1024, coupling=0.5, method="strang"):
                       what=f"{k} pendula on a ring, coupling {c:g}, {'Strang splitting' if method == 'strang' else 'RK2'}")
 
 
-def _bspline(t, degree):
-    """The centred cardinal B-spline of ``degree`` (1 or 3) and its derivative at t (any shape)."""
-    a = np.abs(np.real(t))
-    s = np.where(np.real(t) < 0, -1.0, 1.0)
-    u = s * t                               # |t| with the imaginary part carried (complex step)
-    if degree == 1:
-        inside = a < 1
-        return np.where(inside, 1 - u, 0.0), np.where(inside, -s, 0.0)
-    one, two = a < 1, (a >= 1) & (a < 2)
-    S = np.where(one, 2 / 3 - u * u + 0.5 * u ** 3, np.where(two, (2 - u) ** 3 / 6, 0.0))
-    dS = np.where(one, s * (-2 * u + 1.5 * u * u), np.where(two, -s * 0.5 * (2 - u) ** 2, 0.0))
-    return S, dS
-
-
 def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"):
     """A 1-D electrostatic PIC step (electrons, charge −1 and mass 1 in total, ions a fixed background):
     (step, info).  Positions on [0, L) (period L); ``degree`` 1 or 3; ``method`` 'strang' or 'rk2'."""
@@ -90,47 +77,68 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
         raise ValueError(f"method must be 'strang' or 'rk2', got {method!r}")
     N, M, L = int(particles), int(cells), float(length)
     dx = L / M
-    X = np.arange(M) * dx
     q_p = -L / N                          # charge per particle: total −L against a background of +1
     kk = TWO_PI * np.fft.rfftfreq(M, d=dx)
     inv_k2 = np.zeros_like(kk)
     inv_k2[1:] = 1.0 / kk[1:] ** 2
-    reach = 1 if degree == 1 else 2       # cells a shape function touches on each side
+    offsets = (0, 1) if degree == 1 else (-1, 0, 1, 2)    # the nodes a particle's shape touches, from j
+    E = M + 3                             # nodes with ghosts: node m of the support at column m + 1
 
-    def _offsets(x):
-        """Per particle: the nearest-below node index j and the offsets t = (x − X_m)/Δ to the nodes
-        j − reach + 1 … j + reach (its support), as (..., 2·reach)."""
-        j = np.floor(np.real(x) / dx).astype(np.int64)
-        m = j[..., None] + np.arange(-reach + 1, reach + 1)
-        t = x[..., None] / dx - m                     # before the nodes are wrapped
-        return m % M, t
+    def _shape(x):
+        """Per particle (..., N): its cell j = ⌊x/Δ⌋ mod M and, for each node j + o of its support, the
+        shape S((x − X_{j+o})/Δ) and S' there, as polynomials of f = x/Δ − ⌊x/Δ⌋ ∈ [0, 1) (analytic in
+        f, so complex-step safe; the floor from the real part)."""
+        xs = x / dx
+        fl = np.floor(np.real(xs))
+        f = xs - fl
+        j = fl.astype(np.int64) % M
+        if degree == 1:
+            return j, (1 - f, f), (-np.ones_like(f), np.ones_like(f))
+        g, f2 = 1 - f, f * f
+        f3 = f2 * f
+        return j, (g * g * g / 6, (3 * f3 - 6 * f2 + 4) / 6, (-3 * f3 + 3 * f2 + 3 * f + 1) / 6, f3 / 6), \
+            (-g * g / 2, (3 * f2 - 4 * f) / 2, (-3 * f2 + 2 * f + 1) / 2, f2 / 2)
 
-    def _deposit(x):
-        """The electrons' charge density at the nodes for each row of positions x (n, N): (n, M)."""
-        m, t = _offsets(x)
-        S, _ = _bspline(t, degree)
+    def _deposit(x, shape=None):
+        """The electrons' charge density at the nodes for each row of positions x (n, N): (n, M).
+        Deposited on M + 3 columns (a ghost node below, two above), then folded periodically."""
         n = x.shape[0]
-        idx = (np.arange(n)[:, None, None] * M + m).ravel()
-        w = (q_p / dx) * S.ravel()
-        count = lambda wr: np.bincount(idx, weights=wr, minlength=n * M).reshape(n, M)
-        return count(w.real) + 1j * count(w.imag) if np.iscomplexobj(w) else count(w)
+        j, S, _ = _shape(x) if shape is None else shape
+        at = ((np.arange(n) * E)[:, None] + j + 1).ravel()
 
-    def potential(x):
+        def count(part):
+            ext = sum(np.bincount(at + o, weights=part(w).ravel(), minlength=n * E) for o, w in zip(offsets, S))
+            ext = ext.reshape(n, E)
+            rho = ext[:, 1:M + 1].copy()
+            rho[:, M - 1] += ext[:, 0]
+            rho[:, 0] += ext[:, M + 1]
+            rho[:, 1] += ext[:, M + 2]
+            return (q_p / dx) * rho
+        return count(np.real) + 1j * count(np.imag) if np.iscomplexobj(S[0]) else count(np.real)
+
+    def potential(x, shape=None):
         """φ at the nodes for each row of particle positions x (n, N): (n, M)."""
-        rho = _deposit(x) + 1.0                       # the ions' background
+        rho = _deposit(x, shape) + 1.0                # the ions' background
         solve = lambda r: np.fft.irfft(np.fft.rfft(r, axis=1) * inv_k2, n=M, axis=1)   # −φ'' = ρ, mean zero
         if np.iscomplexobj(rho):                      # complex step: the (linear) solve of each part
             return solve(rho.real) + 1j * solve(rho.imag)
         return solve(rho)
 
     def accel(x):
-        """−(1/m_p) ∂W/∂x_j with W = ½ Σ ρ_m φ_m Δ: the exact gradient of the field energy (n, N)."""
-        phi = potential(x)
-        m, t = _offsets(x)
-        _, dS = _bspline(t, degree)
-        phim = np.take_along_axis(np.broadcast_to(phi[:, None, :], m.shape[:2] + (M,)), m, axis=2)
-        # ∂ρ_m/∂x_j = q_p S'((x_j − X_m)/Δ)/Δ², force −Δ Σ_m φ_m ∂ρ_m/∂x_j; mass m_p = −q_p (q/m = −1)
-        return np.sum(phim * dS, axis=-1) / dx
+        """−(1/m_p) ∂W/∂x_j with W = ½ Σ ρ_m φ_m Δ: the exact gradient of the field energy (n, N).
+        ∂ρ_m/∂x_j = q_p S'((x_j − X_m)/Δ)/Δ², force −Δ Σ_m φ_m ∂ρ_m/∂x_j, mass m_p = −q_p (q/m = −1).
+        Rows in chunks of ROWS, so that the temporaries stay in cache (2.8x faster at 10,000 particles)."""
+        if x.shape[0] > ROWS:
+            return np.concatenate([accel(x[i:i + ROWS]) for i in range(0, x.shape[0], ROWS)])
+        shape = _shape(x)
+        phi = potential(x, shape)
+        j, _, dS = shape
+        ext = np.concatenate([phi[:, M - 1:], phi, phi[:, :2]], axis=1).ravel()    # the ghosts of _deposit
+        at = (np.arange(x.shape[0]) * E)[:, None] + j + 1
+        a = 0.0
+        for o, d in zip(offsets, dS):
+            a = a + ext[at + o] * d
+        return a / dx
 
     step = _integrator(accel, L, method)
 
@@ -164,8 +172,9 @@ def example(name, k=None):
     and ``period`` the audit's defaults.  ``k``: pendula (default 1,024) or particles (default 10,000).
 
     pendula: angles uniform in [0, 2π) and momenta normal with deviation 0.5 (numpy's generator of
-    seed 1), h = 0.1.  pic (cubic B-splines) and pic1 (linear): 64 cells on [0, 4π), a Landau-damping
-    start (α = 0.01, mode 1), h = 0.1."""
+    seed 1), h = 0.1, loop radius 0.01 (at 0.1 the loop of 4,096 pendula stretches out of resolution
+    within 100 steps: near-separatrix pendula; the monitor says so).  pic (cubic B-splines) and pic1
+    (linear): 64 cells on [0, 4π), a Landau-damping start (α = 0.01, mode 1), h = 0.1, radius 0.1."""
     if name not in EXAMPLES:
         raise ValueError(f"unknown example '{name}' (choose one of {', '.join(EXAMPLES)})")
     family, method = name.split("-")
@@ -181,4 +190,5 @@ def example(name, k=None):
         step, info = pic(particles=k, degree=3 if family == "pic" else 1, method=method)
         info["point"] = info["landau"]()
     info["h"] = 0.1
+    info["radius"] = 0.01 if family == "pendula" else 0.1   # pendula: a 0.1 loop of 4,096 stretches out of resolution
     return step, info
