@@ -254,6 +254,12 @@ def plot_file(path, outdir=None):
     return written
 
 
+def _level_label(n, inv):
+    """A refinement level by its size: "256" points of a loop, "47 × 47" of a square surface."""
+    r = int(round(n ** 0.5))
+    return f"{r} × {r}" if inv == "I2" and r * r == n else f"{n:,}"
+
+
 def _refinement(run, out):
     """The points each refining set's invariant was taken on, against time (a step line): pairs
     whose series are the same are one line, labelled with all of them; the legend below the panel."""
@@ -275,6 +281,9 @@ def _refinement(run, out):
                                                       f"{len(names)} pairs, the same: {names[0]} … {names[-1]}")
             ax.step(t, used, where="post", lw=1.0, label=label, ls=("-", "--", ":", "-.")[k // 10 % 4])
         ax.set_yscale("log", base=2)
+        levels = sorted({int(x) for _, used, _ in groups.values() for x in np.asarray(used) if x > 0})
+        ax.set_yticks(levels, [_level_label(x, inv) for x in levels])    # the levels used, by their sizes
+        ax.minorticks_off()
         ax.set_title(f"{'loop' if inv == 'I1' else 'surface'} ({inv})", fontsize=10)
         ax.set_ylabel("points the invariant was taken on", fontsize=8)
         ax.set_xlabel("t", fontsize=8)
