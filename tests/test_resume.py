@@ -297,3 +297,22 @@ def test_kill_and_resume_gives_the_same_bits(tmp_path):
     r = poincare("run", str(scene), "-o", str(part), "-q", "--resume")
     assert r.returncode == rc_full, r.stderr
     assert same(dump(full, skip=("wall_clock", "checkpoint")), dump(part, skip=("wall_clock", "checkpoint")))
+
+
+def test_a_file_from_before_checkpoints_noted_newtons_factors_is_refused_in_one_line(tmp_path):
+    """A run file whose checkpoints lack have_lu, jac_z, jac_q, jac_lam (written before issue 56) is not
+    resumed (a resume could not give the bits of the run it continues) and is not called damaged: one
+    line, exit 2, and its results still read."""
+    scene = tmp_path / "lv.toml"
+    scene.write_text(LV)
+    out = tmp_path / "lv.h5"
+    assert poincare("run", str(scene), "-o", str(out), "-q").returncode in (0, 1)
+    with h5py.File(out, "r+") as f:
+        for g in f["runs"].values():
+            for slot in ("a", "b"):
+                for k in ("have_lu", "jac_z", "jac_q", "jac_lam"):
+                    del g[f"checkpoint/{slot}/{k}"]
+    r = poincare("run", str(scene), "-o", str(out), "-q", "--resume")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "earlier version" in r.stderr and "damaged" not in r.stderr and "--force" in r.stderr
+    assert integrators.service.read_run(out).pairs

@@ -70,6 +70,12 @@ def _check_pairs(f, runs, scene, limit, State):
         g = runs[name]
         if str(g.attrs.get("status", "")) not in STATUSES:
             raise damaged(f"{g.name} has the status {g.attrs.get('status')!r}")
+        older = [k for k in STATE_FIELDS if "checkpoint/a" in g and k not in g["checkpoint/a"]]
+        if older and all(k in NOTED_SINCE_ISSUE_56 for k in older):
+            raise DamagedFile(f"'{path}' was written by an earlier version, whose checkpoints do not note where "
+                              f"Newton's factors were taken ({', '.join(older)}): a resume could not give the bits of "
+                              "the run it continues. Its results read (poincare plot, read_run); to continue, start "
+                              "again with --force")
         lengths = set()
 
         def visit(key, obj):
@@ -116,6 +122,9 @@ def _check_pairs(f, runs, scene, limit, State):
                 ds = c[field]
                 if ds.shape[0] != n or ds.dtype != dtype:
                     raise damaged(f"{ds.name} has shape {ds.shape} and type {ds.dtype}")
+
+
+NOTED_SINCE_ISSUE_56 = ("have_lu", "jac_z", "jac_q", "jac_lam")   # checkpoint fields added then
 
 
 def open_for_resume(path):
