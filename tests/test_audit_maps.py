@@ -144,3 +144,19 @@ def test_poincare_audit_map_from_the_command_line(tmp_path):
                       (["--map", "pendula-strang", "--k", "0"], "--k must be")):
         r = poincare("audit", *args, "-q", cwd=tmp_path)
         assert r.returncode != 0 and msg in r.stderr and r.stderr.count("\n") == 1, (args, r.stderr)
+
+
+def test_the_surface_in_the_loops_plane():
+    """surface=(12, 12): a square of half-side r in the loop's plane (all x against all v, ω = 1) has
+    I₂ = −(2r)² and the loop I₁ = −πr² at t = 0 (to 1e-13); Strang keeps both to round-off, RK2 neither."""
+    out = {}
+    for method in ("strang", "rk2"):
+        step, point, info = _pendula(8, method)
+        c = audit_map(step, point, 0.1, steps=40, loop_points=128, surface=(12, 12), radius=0.01,
+                      period=info["period"])["candidates"][0]
+        out[method] = c["drift"]
+    for d in out.values():
+        assert abs(d["I1/canonical"]["value_at_start"] + np.pi * 1e-4) < 1e-13 * np.pi * 1e-4
+        assert abs(d["I2/canonical"]["value_at_start"] + 4e-4) < 1e-13 * 4e-4
+    assert out["strang"]["I1/canonical"]["verdict"] == out["strang"]["I2/canonical"]["verdict"] == "round-off"
+    assert out["rk2"]["I2/canonical"]["max_error"] > 1e-4 and out["rk2"]["I1/canonical"]["max_error"] > 1e-4
