@@ -242,9 +242,11 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=Non
     q = _check(q, 2, "loop q")
     P = _periods(period, q.shape[1])
     r, ramp = (q, None) if P is None else _winding(q, P)
-    reason = _jumps(r, P, (0,), closed=True)
     qh = spectral.fourier_coefficients(r)
     tail_q = spectral.loop_tail(r, qh)
+    # a jump of a wrapped coordinate is a discontinuity, whose spectrum already flags the set: the
+    # reason is sought only then (a third of the call's time at D = 2 otherwise)
+    reason = _jumps(r, P, (0,), closed=True) if tail_q > UNDER_RESOLVED else ""
     half = q.shape[0] % 2 == 0 and q.shape[0] // 2 >= MIN_POINTS    # the every-other-point subset
     qh2 = None
     out = {}
@@ -376,7 +378,6 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
     named = [f for f in forms if not callable(f)]
     P = _periods(period, d)
     qu = q if P is None else _unwrap(_unwrap(q, P, 1), P, 0)    # along τ, then σ: the patch in one sheet
-    reason = _jumps(qu, P, (0, 1), closed=False)
     if P is not None:
         for form in forms:
             if callable(form):
@@ -387,6 +388,7 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
     qs, qt = spectral.chebyshev_derivative(qu, 0, cq0), spectral.chebyshev_derivative(qu, 1)
     cq2 = np.abs(spectral.chebyshev_coefficients(cq0, 1))
     tail_q = spectral.coefficient_tail(cq2)
+    reason = _jumps(qu, P, (0, 1), closed=False) if tail_q > UNDER_RESOLVED else ""   # (as for loops)
     out, omega = {}, {}
     if "noncanonical" in named or "corrected" in named:
         sy = _need(system, "system", "noncanonical" if "noncanonical" in named else "corrected")
