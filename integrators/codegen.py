@@ -22,7 +22,7 @@ from pathlib import Path
 
 from sympy.printing.numpy import NumPyPrinter
 
-CODEGEN_VERSION = "5"          # bump when the generated source changes shape
+CODEGEN_VERSION = "6"          # bump when the generated source changes shape (6: zero loops)
 DD_CODEGEN_VERSION = "3"       # ... and this when the double-double source does
 
 
@@ -181,9 +181,30 @@ def _body(exprs, targets, qsyms, params, indent, known=(), printer=None, fields=
     names.update({sym: f"_x{len(known) + i}" for i, (sym, _) in enumerate(subs)})
     pr = (printer or _EnginePrinter).make(names)
     pad = " " * indent
-    lines = [f"{pad}{names[sym]} = {pr.doprint(e)}" for sym, e in subs]
-    lines += [f"{pad}st({a}, {i}, {pr.doprint(e)})" for (a, i), e in zip(targets, reduced)]
+    filled = _zero_filled(targets, reduced)
+    zero = pr.doprint(sympy.Integer(0))
+    lines = [x for a, n in filled.items() for x in (f"{pad}for _i in range({n}):", f"{pad}    st({a}, _i, {zero})")]
+    lines += [f"{pad}{names[sym]} = {pr.doprint(e)}" for sym, e in subs]
+    lines += [f"{pad}st({a}, {i}, {pr.doprint(e)})" for (a, i), e in zip(targets, reduced)
+              if not (a in filled and e.is_zero is True)]
     return lines, list(known) + subs
+
+
+ZERO_LOOP = 16     # an array with at least this many zero entries is zeroed by a loop, not entry by entry
+
+
+def _zero_filled(targets, exprs) -> dict:
+    """{array: size} of the target arrays written whole (indices 0 … size − 1) with at least ZERO_LOOP
+    zero entries: a loop stores their zeros and only the others are written one by one.  The values
+    are the same; the code of a system of d coordinates no longer grows as d³ where ϑ_qq is sparse
+    (a ring of 32 pendula: 262,144 entries of ϑ_qq, all zero)."""
+    by = {}
+    for (a, i), e in zip(targets, exprs):
+        idx, zeros = by.setdefault(a, ([], [0]))
+        idx.append(i)
+        zeros[0] += e.is_zero is True
+    return {a: len(idx) for a, (idx, zeros) in by.items()
+            if zeros[0] >= ZERO_LOOP and sorted(idx) == list(range(len(idx)))}
 
 
 def generate_source(system) -> str:
