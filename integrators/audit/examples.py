@@ -68,6 +68,16 @@ def pendulum_array(k=1024, coupling=0.5, method="strang"):
                       what=f"{k} pendula on a ring, coupling {c:g}, {'Strang splitting' if method == 'strang' else 'RK2'}")
 
 
+def landau_start(N, L, alpha=0.01, mode=1, seed=1):
+    """A Landau-damping initial point (x0, v0) of N particles on [0, L): x quiet-started with density
+    1 + α cos(k x), k = 2π·mode/L, v Maxwellian (unit thermal speed) from numpy's generator of ``seed``."""
+    rng = np.random.default_rng(seed)
+    kx = TWO_PI * mode / L
+    u = (np.arange(N) + 0.5) / N * L
+    x = u - alpha / kx * np.sin(kx * u)           # inverse of the cumulative density, to first order
+    return _wrap(x, L), rng.standard_normal(N)
+
+
 def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"):
     """A 1-D electrostatic PIC step (electrons, charge −1 and mass 1 in total, ions a fixed background):
     (step, info).  Positions on [0, L) (period L); ``degree`` 1 or 3; ``method`` 'strang' or 'rk2'."""
@@ -149,17 +159,9 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
         field = 0.5 * dx * np.sum(rho * phi, axis=-1)
         return (-q_p) * 0.5 * np.sum(np.atleast_2d(v) ** 2, axis=-1) + field
 
-    def landau(alpha=0.01, mode=1, seed=1):
-        """A Landau-damping initial point (x0, v0): x quiet-started with density 1 + α cos(k x),
-        k = 2π·mode/L, v Maxwellian (unit thermal speed) from numpy's generator of ``seed``."""
-        rng = np.random.default_rng(seed)
-        kx = TWO_PI * mode / L
-        u = (np.arange(N) + 0.5) / N * L
-        x = u - alpha / kx * np.sin(kx * u)           # inverse of the cumulative density, to first order
-        return _wrap(x, L), rng.standard_normal(N)
-
     step.__name__ = f"pic_{method}_deg{degree}"
-    return step, dict(k=N, period=L, energy=energy, landau=landau, method=method, degree=degree,
+    return step, dict(k=N, period=L, energy=energy, method=method, degree=degree,
+                      landau=lambda alpha=0.01, mode=1, seed=1: landau_start(N, L, alpha, mode, seed),
                       what=f"1-D electrostatic PIC, {N} particles, {M} cells, B-splines of degree {degree}, "
                            f"{'Strang splitting' if method == 'strang' else 'RK2'}")
 

@@ -231,26 +231,34 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
         entry = {"name": nm, "role": "candidate", "kind": "canonical map", "breakdown_step": None, "drift": {},
                  "t": [], "errors": {}, "defect": {}, "jacobian": None}
         _drift(entry, s, sets, shapes, k, P, h, steps, every, progress)
-        vals, used, kinds = [], [], set()
-        for hk in hs:
-            if progress:
-                progress(f"{nm}: one-step defect at h = {hk:g}")
-            try:
-                v, u, kind = map_defect(s, loop[sel], hk, probes, method, seed)
-            except Exception as exc:         # the user's map raised: a verdict, not a traceback
-                v, u, kind = math.nan, f"none ({type(exc).__name__}: {exc})", "—"
-            vals.append(v)
-            used.append(u)
-            kinds.add(kind)
-        floors = np.array([DEFECT_FLOOR.get(u, np.inf) for u in used])
-        arr = np.array(vals, dtype=float)
-        verdict = ("step failed" if not np.all(np.isfinite(arr)) else
-                   "symplectic" if np.all(arr <= floors) else "not symplectic")
-        entry["defect"] = {"canonical": {"h": hs, "defect": arr.tolist(), "order": fit_order(hs, arr, floors.max())
-                                         if np.all(np.isfinite(floors)) else None, "verdict": verdict}}
-        entry["jacobian"] = ", ".join(sorted(set(used))) + f" ({', '.join(sorted(kinds))})"
+        entry["defect"], entry["jacobian"] = _defect_study(s, loop[sel], hs, probes, method, seed,
+                                                           None if progress is None else
+                                                           (lambda hk, nm=nm: progress(f"{nm}: one-step defect at h = {hk:g}")))
         report["candidates"].append(entry)
     return report
+
+
+def _defect_study(step, z, hs, probes, method, seed, progress):
+    """({'canonical': {h, defect, order, verdict}}, the Jacobian method) of a map at points z over
+    the step sizes hs, judged against the method's floor as :func:`integrators.audit.defect_study`."""
+    vals, used, kinds = [], [], set()
+    for hk in hs:
+        if progress:
+            progress(hk)
+        try:
+            v, u, kind = map_defect(step, z, hk, probes, method, seed)
+        except Exception as exc:         # the user's map raised: a verdict, not a traceback
+            v, u, kind = math.nan, f"none ({type(exc).__name__}: {exc})", "—"
+        vals.append(v)
+        used.append(u)
+        kinds.add(kind)
+    floors = np.array([DEFECT_FLOOR.get(u, np.inf) for u in used])
+    arr = np.array(vals, dtype=float)
+    verdict = ("step failed" if not np.all(np.isfinite(arr)) else
+               "symplectic" if np.all(arr <= floors) else "not symplectic")
+    order = fit_order(hs, arr, floors.max()) if np.all(np.isfinite(floors)) else None
+    return ({"canonical": {"h": hs, "defect": arr.tolist(), "order": order, "verdict": verdict}},
+            ", ".join(sorted(set(used))) + f" ({', '.join(sorted(kinds))})")
 
 
 def _drift(entry, step, sets, shapes, k, P, h, steps, every, progress):
