@@ -146,7 +146,8 @@ def _center(center, d):
         return np.zeros(d)
     c = np.asarray(center, dtype=float) if isinstance(center, (list, tuple, np.ndarray)) else None
     if c is None or c.shape != (d,):
-        raise ValueError(f"params.center must be a list of d = {d} numbers, got {center!r}")
+        raise ValueError(f"params.center must be a list of d = {d} numbers, got "
+                         + (f"{c.size} numbers" if c is not None else repr(center)))
     return c
 
 

@@ -269,3 +269,113 @@ def test_a_scene_of_step_maps_only(tmp_path):
     assert [p.label for p in scene.pairs] == ["rk4"]
     with pytest.raises(SceneError, match="non-empty list"):
         parse_scene(re.sub(r'(?m)^tableaus = .*$', 'tableaus = []', SCENE), str(tmp_path / "s.toml"))
+
+
+RING = '''import numpy as np
+from integrators.audit.examples import pendulum_array
+
+K = 6
+strang, info = pendulum_array(K, method="strang")
+rk2 = pendulum_array(K, method="rk2")[0]
+energy = info["energy"]
+
+
+def start():
+    """Every pendulum near the bottom, x = 0.02: the loop (radius 0.05 in pendulum 0's plane)
+    straddles the angle 0, and the maps wrap it into [0, 2π)."""
+    return np.full(K, 0.02), np.linspace(0.0, 0.05, K)
+'''
+
+RING_SCENE = '''name = "ring"
+[system]
+name = "ring"
+degrees_of_freedom = 6
+period = 6.283185307179586
+energy = "ring.py:energy"
+
+[loop]
+shape = "ellipse"
+points = 64
+params = { d = 12, center = "ring.py:start", radii = [0.05, 0.05], plane = [0, 6] }
+
+[run]
+tableaus = []
+step_maps = ["ring.py:strang", "ring.py:rk2"]
+h = 0.1
+steps = 60
+output_every = 10
+store_points = true
+'''
+
+
+@pytest.mark.mpi
+def test_a_canonical_map_scene_gives_one_file_on_1_2_3_ranks_and_resumes_to_it(tmp_path):
+    """system.degrees_of_freedom: step(x, v, h) maps with no formula through the driver (issue 53):
+    1, 2 and 3 ranks write the same file bit for bit; a run extended by --resume is the straight
+    run's file; Strang keeps the canonical I₁ of a loop whose angles are wrapped at round-off and
+    the energy error small, RK2 does not keep I₁."""
+    from helpers import dump
+    (tmp_path / "ring.py").write_text(RING)
+    scene = tmp_path / "ring.toml"
+    scene.write_text(RING_SCENE)
+    for n, out in ((None, "one.h5"), (2, "two.h5"), (3, "three.h5")):
+        r = _poincare("run", str(scene), "-o", str(tmp_path / out), "-q", n=n, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    one = dump(tmp_path / "one.h5", skip=("wall_clock", "checkpoint"))
+    for out in ("two.h5", "three.h5"):
+        other = dump(tmp_path / out, skip=("wall_clock", "checkpoint"))
+        assert one.keys() == other.keys() and all(
+            np.array_equal(one[k], other[k], equal_nan=True) if k != "status" else one[k] == other[k] for k in one)
+    run = read_run(tmp_path / "one.h5")
+    pts = run["strang-map"].points["loop"][1:]
+    assert np.all((pts[..., :6] >= 0) & (pts[..., :6] < 2 * np.pi)) and np.sum(np.ptp(pts[..., 0], axis=1) > 6) >= 3
+    assert run["strang-map"].relative_error("I1", "canonical").max() < 1e-12
+    assert 0 < run["strang-map"].errors["energy"].max() < 1e-2
+    assert run["rk2-map"].relative_error("I1", "canonical").max() > 1e-6
+    short = tmp_path / "short.toml"
+    short.write_text(RING_SCENE.replace("steps = 60", "steps = 30"))
+    assert _poincare("run", str(short), "-o", str(tmp_path / "ext.h5"), "-q", cwd=tmp_path).returncode == 0
+    r = _poincare("run", str(scene), "-o", str(tmp_path / "ext.h5"), "-q", "--resume", n=2, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    ext = dump(tmp_path / "ext.h5", skip=("wall_clock", "checkpoint"))
+    assert ext.keys() == one.keys() and all(
+        np.array_equal(one[k], ext[k], equal_nan=True) if k != "status" else one[k] == ext[k] for k in one)
+
+
+def test_a_canonical_map_scene_without_the_period_is_under_resolved_not_wrong(tmp_path):
+    """The same loop with system.period left out: its wrapped angles jump by 2π between neighbours,
+    and the run says under-resolved rather than reporting a value."""
+    (tmp_path / "ring.py").write_text(RING)
+    scene = tmp_path / "ring.toml"
+    scene.write_text(RING_SCENE.replace("period = 6.283185307179586\n", ""))
+    r = _poincare("run", str(scene), "-o", str(tmp_path / "x.h5"), "-q", cwd=tmp_path)
+    assert r.returncode == 1
+    run = read_run(tmp_path / "x.h5")
+    assert run["strang-map"].status == "under-resolved" and not run["strang-map"].resolved["I1"][1:].any()
+
+
+@pytest.mark.parametrize("change, match", [
+    (('tableaus = []', 'tableaus = ["GLRK2"]\nprojections = ["none"]'), "has no formula for the engine"),
+    (('h = 0.1', 'h = 0.1\nforms = ["canonical", "noncanonical"]'), "canonical form v·dx only"),
+    (('h = 0.1', 'h = 0.1\ndiagnostics = ["constraint"]'), "energy error only"),
+    (('period = 6.283185307179586', 'period = [1.0, 2.0]'), "2 entries for 6 positions"),
+    (('period = 6.283185307179586', 'period = -1.0'), "system.period of coordinate 0"),
+    (('energy = "ring.py:energy"', 'energy = "ring.py:nothere"'), "system.energy.*no function 'nothere'"),
+    (('degrees_of_freedom = 6', 'degrees_of_freedom = 6\ntheta = ["x"]'), "system.theta cannot go with"),
+    (('center = "ring.py:start"', 'center = "ring.py:energy"'), "loop.params.center.*failed"),
+    (('d = 12', 'd = 10'), "center must be a list of d = 10 numbers, got 12"),
+])
+def test_canonical_map_scene_mistakes_are_one_line_errors(tmp_path, change, match):
+    (tmp_path / "ring.py").write_text(RING)
+    with pytest.raises(SceneError, match=match):
+        parse_scene(RING_SCENE.replace(*change), str(tmp_path / "ring.toml"))
+
+
+def test_the_builtin_canonical_map_scene_tells_strang_from_rk2(tmp_path):
+    """poincare run pendula_map (256 pendula, maps only): Strang keeps I₁ at round-off, RK2 does not."""
+    r = _poincare("run", "pendula_map", "-o", str(tmp_path / "p.h5"), "-q", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    run = read_run(tmp_path / "p.h5")
+    assert run["strang-map"].relative_error("I1", "canonical").max() < 1e-11
+    assert run["rk2-map"].relative_error("I1", "canonical").max() > 1e-3
+    assert all(run[k].resolved["I1"].all() for k in run.pairs)

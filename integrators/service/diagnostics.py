@@ -90,6 +90,8 @@ class Diagnostics:
         double-double and each difference is taken there before it is rounded to double."""
         from ..codegen import point_functions, scalar_function
         sc, sy = self.scene, self.system
+        if getattr(sy, "black_box", False):
+            return self._point_errors_black_box(q, live)
         if np.ndim(q) == 3 or self.dd:         # (doubles in a double-double run: taken exactly)
             pairs = lambda x: x if np.ndim(x) == 3 else np.stack([x, np.zeros_like(x)], axis=-1)
             return self._point_errors_dd(pairs(np.asarray(q, dtype=float)), pairs(np.asarray(p, dtype=float)), live)
@@ -103,6 +105,17 @@ class Diagnostics:
         names = (("energy", "energy_error", 0), ("momentum", "momentum_error", 1),
                  ("constraint", "constraint_error", 2))
         return {key: float(out[i]) for what, key, i in names if what in sc.diagnostics}
+
+    def _point_errors_black_box(self, q, live) -> dict:
+        """A canonical phase space's energy error, from its system.energy (numpy, the live points)."""
+        if "energy" not in self.scene.diagnostics:
+            return {}
+        live = np.asarray(live, dtype=bool)
+        if not live.any():
+            return {"energy_error": 0.0}
+        with np.errstate(all="ignore"):
+            e = np.abs(self.system.H(np.asarray(q)[live]) - self.H0[live]) / self.scale[live]
+        return {"energy_error": float(np.max(e))}            # (numpy's max: a NaN wins)
 
     def _point_errors_dd(self, q, p, live) -> dict:
         from ..engine import scalars_dd, theta_dd
@@ -134,7 +147,7 @@ class Diagnostics:
         fn = invariants.first_invariant if spec.invariant == "I1" else invariants.second_invariant
         with np.errstate(all="ignore"):
             try:
-                v = fn(q, form, system=self.system, p=p, lam=lam, h=self.scene.h)
+                v = fn(q, form, system=self.system, p=p, lam=lam, h=self.scene.h, period=_period(self.system))
             except ValueError:          # non-finite values
                 return np.nan, np.nan, False
         return v.value, v.resolution, True
@@ -177,7 +190,8 @@ class Diagnostics:
             fn = invariants.forms.first_invariants if spec.invariant == "I1" else invariants.forms.second_invariants
             with np.errstate(all="ignore"):
                 try:
-                    got = fn(q, list(forms), system=self.system, p=p, lam=lam, h=self.scene.h)
+                    got = fn(q, list(forms), system=self.system, p=p, lam=lam, h=self.scene.h,
+                             period=_period(self.system))
                     return {(spec.invariant, f): (got[f].value, got[f].resolution, True, True) for f in forms}
                 except ValueError:      # a non-finite field: each form on its own says which fail
                     pass
@@ -215,10 +229,19 @@ def _params(system):
     return system.param_vector()
 
 
+def _period(system):
+    """The periods of the system's coordinates (a canonical phase space's positions), or None."""
+    return getattr(system, "period", None)
+
+
 def _scalars(system, q):
-    """H and the momentum (0 without a symmetry) at every point, by the system's compiled function."""
+    """H and the momentum (0 without a symmetry) at every point, by the system's compiled function
+    (a canonical phase space: its energy function, or 0 without one)."""
     from ..codegen import scalar_function
     q = np.ascontiguousarray(q, dtype=float)
+    if getattr(system, "black_box", False):
+        H = system.H(q) if system.energy is not None else np.zeros(q.shape[0])
+        return H, np.zeros(q.shape[0])
     out = np.empty((q.shape[0], 2))
     _scalars_at(scalar_function(system), _params(system), q, out)
     return out[:, 0].copy(), out[:, 1].copy()

@@ -247,7 +247,8 @@ def _preflight(comm, scene, path, resume, force):
     error = None
     from ..codegen import CacheError, point_functions
     try:                               # the engine's code for this system, compiled before any file is touched
-        point_functions(system)
+        if not getattr(system, "black_box", False):
+            point_functions(system)
     except CacheError as exc:
         error = str(exc)
     except Exception as exc:

@@ -25,12 +25,21 @@ A scene file::
     cocos = 3                             # its sign conventions (COCOS index; default: identified from the file)
     params = { mu = 1e-5 }                # the magnetic moment (default from the plasma's size and field)
 
+    [system]                              # ... or a canonical phase space with no formula (docs/systems.md)
+    name = "pendula"                      # a label
+    degrees_of_freedom = 1024             # k: q = (x_0 … x_{k−1}, v_0 … v_{k−1}), the form v·dx; run.step_maps
+                                          # are then canonical maps step(x, v, h) -> (x, v) on (n, k) arrays
+    period = 6.283185307179586            # optional: the positions' period (one number or one per x; 0: none)
+    energy = "maps.py:energy"             # optional: batched energy(x, v) -> (n,), for the energy error
+
     [loop]                                # optional: a closed loop of sample points
     shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function": called as
                                           # f(tau, **params), tau the (N,) array j/N in [0, 1), returning (N, d)
     points = 2000
     params = { rx = 0.5 }                 # optional shape parameters; any system: shape = "ellipse" with
-                                          # params = { d = 2, center = [1.0, 1.0], radii = [0.04, 0.04], plane = [0, 1] }
+                                          # params = { d = 2, center = [1.0, 1.0], radii = [0.04, 0.04], plane = [0, 1] };
+                                          # center = "maps.py:start" takes what start() returns (an array of d,
+                                          # or a tuple joined: (x0, v0)), for centres too long to write
     refine_to = 16000                     # optional: the loop may refine itself up to this many points
                                           # (N → 2N, every old τ kept; the surface: n → 2n − 1 per direction)
 
@@ -133,7 +142,7 @@ class LoopSpec:
     def sample(self, base=None):
         """(N, d) sample points."""
         from invariants import samples
-        return samples.loop(_shape(self.shape, "loop.shape", base), self.points, **self.params)
+        return samples.loop(_shape(self.shape, "loop.shape", base), self.points, **_set_params(self.params, "loop", base))
 
     def at_level(self, level):
         """The loop ``level`` refinements on (N·2^level points, every old τ kept); level 0 is this one."""
@@ -170,7 +179,8 @@ class SurfaceSpec:
     def sample(self, base=None):
         """(n_σ, n_τ, d) sample points."""
         from invariants import samples
-        return samples.surface(_shape(self.shape, "surface.shape", base), self.n_sigma, self.n_tau, **self.params)
+        return samples.surface(_shape(self.shape, "surface.shape", base), self.n_sigma, self.n_tau,
+                               **_set_params(self.params, "surface", base))
 
     def at_level(self, level):
         """The surface ``level`` refinements on (n → 2n − 1 Chebyshev points per direction, nested)."""
@@ -256,12 +266,8 @@ class Scene:
 
     def step_map(self, label):
         """The callable of the step map whose pair label is ``label``."""
-        from .plugins import load_callable
         spec = next(m for m in self.step_maps if step_map_label(m) == label)
-        try:
-            return load_callable(spec, "run.step_maps", self.base)
-        except ValueError as exc:
-            raise SceneError(str(exc)) from None
+        return _load(spec, "run.step_maps", self.base)
 
     def with_steps(self, steps: int) -> "Scene":
         """The same scene run for ``steps`` steps (``poincare run --steps``)."""
@@ -331,8 +337,12 @@ def _grid_text(spec):
 
 
 def _shape(spec, key, base=None):
-    if ":" not in spec:
-        return spec
+    return spec if ":" not in spec else _load(spec, key, base)
+
+
+def _load(spec, key, base=None):
+    """The user's callable ``spec`` (file.py:function, module:function) named by scene key ``key``;
+    a SceneError in one line where it cannot be loaded (plugins.load_callable)."""
     from .plugins import load_callable
     try:
         return load_callable(spec, key, base)
@@ -340,10 +350,27 @@ def _shape(spec, key, base=None):
         raise SceneError(str(exc)) from None
 
 
+def _set_params(params, key, base=None):
+    """A set's shape parameters, ``center = "file.py:function"`` replaced by what the function returns
+    when called with no arguments: one array of d numbers, or a tuple of arrays joined in order
+    ((x0, v0) of a canonical phase space).  For centres too long to write in TOML."""
+    c = params.get("center")
+    if not isinstance(c, str):
+        return params
+    fn = _load(c, f"{key}.params.center", base)
+    try:
+        got = fn()
+    except Exception as exc:          # the user's function may raise anything: one line naming it
+        raise SceneError(f"{key}.params.center '{c}' failed: {type(exc).__name__}: {exc}") from None
+    parts = got if isinstance(got, (tuple, list)) else (got,)
+    return {**params, "center": np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in parts])}
+
+
 _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
     "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
-               "momentum": str, "domain": list, "function": str, "equilibrium": str, "cocos": int},
+               "momentum": str, "domain": list, "function": str, "equilibrium": str, "cocos": int,
+               "degrees_of_freedom": int, "period": object, "energy": str},
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
@@ -399,9 +426,12 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     loop, surface = _sets_of(data)
     maps, tabs, tableau_files, projs = _pairs_of(run, base)
     h, steps, every = _steps_of(run)
-    forms = _names(run.get("forms", ["canonical", "noncanonical"]), FORMS, "run.forms")
-    default_diags = [x for x in DIAGNOSTICS if x != "momentum" or system.has_momentum]
-    diags = _names(run.get("diagnostics", default_diags), DIAGNOSTICS, "run.diagnostics")
+    if getattr(system, "black_box", False):
+        forms, diags = _phase_space_records(system, run, maps, tabs)
+    else:
+        forms = _names(run.get("forms", ["canonical", "noncanonical"]), FORMS, "run.forms")
+        default_diags = [x for x in DIAGNOSTICS if x != "momentum" or system.has_momentum]
+        diags = _names(run.get("diagnostics", default_diags), DIAGNOSTICS, "run.diagnostics")
     if "momentum" in diags and not system.has_momentum:
         raise SceneError(f"run.diagnostics: system '{system.name}' has no Noether momentum")
     for t in tabs:
@@ -437,6 +467,25 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     return scene
 
 
+def _phase_space_records(system, run, maps, tabs):
+    """(forms, diagnostics) of a canonical phase space's scene: its maps only, the canonical form
+    only, the energy error where system.energy is given."""
+    if tabs or not maps:
+        raise SceneError("a canonical phase space (system.degrees_of_freedom) has no formula for the engine: give "
+                         "run.step_maps (canonical maps step(x, v, h) -> (x, v)) and run.tableaus = [] or none")
+    forms = _names(run.get("forms", ["canonical"]), FORMS, "run.forms")
+    if forms != ("canonical",):
+        raise SceneError("run.forms: a canonical phase space (system.degrees_of_freedom) has the canonical form "
+                         "v·dx only (its maps are canonical)")
+    energy = () if system.energy is None else ("energy",)
+    diags = run.get("diagnostics", list(energy))
+    if not isinstance(diags, list) or any(x not in energy for x in diags):
+        raise SceneError(f"run.diagnostics: a canonical phase space records {'the energy error only' if energy else 'none'}"
+                         f" ({'system.energy is given' if energy else 'give system.energy for the energy error'}),"
+                         f" got {diags!r}")
+    return forms, tuple(dict.fromkeys(diags))
+
+
 def _tables(text, origin) -> dict:
     """The TOML (restricted reader) with its tables present and their keys known and typed."""
     from ..expressions import load_toml
@@ -464,6 +513,12 @@ def _system_of(sysd, base):
     """[system]: (the System, its parameters, the user system's spec or {})."""
     if "equilibrium" in sysd:
         return _equilibrium_of(sysd, base)
+    if "degrees_of_freedom" in sysd:
+        return _phase_space_of(sysd, base)
+    for k in ("period", "energy"):
+        if k in sysd:
+            raise SceneError(f"system.{k} belongs to system.degrees_of_freedom (a canonical phase space given by "
+                             "step maps)")
     if "cocos" in sysd:
         raise SceneError("system.cocos belongs to system.equilibrium (a G-EQDSK file)")
     user = any(k in sysd for k in ("coordinates", "function"))
@@ -507,6 +562,29 @@ def _equilibrium_of(sysd, base):
     # not where the file lies, which may differ between a run and its resume
     spec = {"equilibrium": e, "cocos": sysd.get("cocos"), "sha256": hashlib.sha256(found.read_bytes()).hexdigest()}
     return _make_system(spec, params, base), params, spec
+
+
+def _phase_space_of(sysd, base):
+    """[system] degrees_of_freedom = k (period = P, energy = "file.py:function"): the canonical phase
+    space (x, v) of dimension 2k of black-box maps (integrators.service.phase_space); run.step_maps are
+    canonical maps step(x, v, h) -> (x, v)."""
+    for k in ("coordinates", "theta", "H", "symmetry", "momentum", "domain", "function", "cocos", "params"):
+        if k in sysd:
+            raise SceneError(f"system.{k} cannot go with system.degrees_of_freedom (a canonical phase space has "
+                             "no formula: its maps are code, run.step_maps)")
+    k = sysd["degrees_of_freedom"]
+    if k < 1:
+        raise SceneError(f"system.degrees_of_freedom must be a positive number of degrees of freedom, got {k}")
+    period = sysd.get("period")
+    if period is not None:
+        if isinstance(period, list):
+            if len(period) != k:
+                raise SceneError(f"system.period has {len(period)} entries for {k} positions (give one number, or "
+                                 "one per position, 0 where not periodic)")
+        elif isinstance(period, bool) or not isinstance(period, (int, float)):
+            raise SceneError(f"system.period must be a number or a list of them, got {period!r}")
+    spec = {key: sysd[key] for key in ("name", "degrees_of_freedom", "period", "energy") if key in sysd}
+    return _make_system(spec, {}, base), {}, spec
 
 
 def _data_file(e, base, what):
@@ -629,13 +707,16 @@ def _make_system(spec, params, base):
             raise SceneError(f"system.equilibrium: {exc}") from None
         except ValueError as exc:
             raise SceneError(f"system.params: {exc}") from None
-    if "function" in spec:
-        from .plugins import load_callable
-        from ..systems import System
+    if "degrees_of_freedom" in spec:
+        from .phase_space import PhaseSpace
+        energy = _load(spec["energy"], "system.energy", base) if "energy" in spec else None
         try:
-            fn = load_callable(spec["function"], "system", base)
+            return PhaseSpace(spec["degrees_of_freedom"], spec.get("name", "canonical"), spec.get("period"), energy)
         except ValueError as exc:
-            raise SceneError(str(exc)) from None
+            raise SceneError(f"system.{exc}") from None
+    if "function" in spec:
+        from ..systems import System
+        fn = _load(spec["function"], "system", base)
         try:
             made = fn(**params)
         except Exception as exc:          # the user's function may raise anything: one line naming it
@@ -730,16 +811,17 @@ def _tableaus(entries, base):
 MEMORY_BASE = 400 * 2**20        # the interpreter, numpy, numba, MPI and HDF5 of one rank (measured ~300 MiB)
 
 
-def memory_per_point(d, s, precision="double") -> tuple:
+def memory_per_point(d, s, precision="double", factors=True) -> tuple:
     """(bytes one sample point costs the rank that advances it, bytes of its state).  The cost: its
     state (:class:`integrators.engine.State`), Newton factors of a pair with s stages (assuming the
     largest system a projection solves, (s + 2)·d unknowns) and its part of the invariants'
     transforms (about 20 arrays of d doubles).  For GLRK2 on a 4-dimensional system this gives
-    3.0 KiB; measured 1.8-2.3 KiB (docs/benchmarks.md)."""
+    3.0 KiB; measured 1.8-2.3 KiB (docs/benchmarks.md).  ``factors`` False: a scene of step maps
+    only, which hold no Newton factors (O(d) a point)."""
     from ..engine import State
     nz = (s + 2) * d
     state = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, d, s, precision).values())
-    factors = 8 * (nz * nz + nz) * (2 if precision == "double-double" else 1)
+    factors = 8 * (nz * nz + nz) * (2 if precision == "double-double" else 1) if factors else 0
     return state + factors + 8 * 20 * d, state
 
 
@@ -778,7 +860,7 @@ def _check_memory(scene, system):
     n, d = scene.n_points, system.d
     s = scene.max_stages
     local = _local_ranks()
-    per_point, state = memory_per_point(d, s, scene.precision)
+    per_point, state = memory_per_point(d, s, scene.precision, factors=bool(scene.tableaus))
     # every local rank holds all points' samples and set values (~16 arrays of d doubles) and
     # advances its share; rank 0 also gathers every point's state for a checkpoint
     need = local * (MEMORY_BASE + 8 * 16 * d * n) + (per_point + state) * n
@@ -832,6 +914,9 @@ def _check_points(scene, system):
             raise SceneError(f"{what}: all {q.shape[0]:,} points are the same point {q[0].tolist()} (a set of zero "
                              "extent: its invariant is 0 and no relative error of it can be measured); give the "
                              "shape radii or a size > 0")
+        if getattr(system, "black_box", False):
+            _check_energy(system, q, what)
+            continue
         with np.errstate(all="ignore"):
             for key, values in (("H", system.H(q)), ("theta", system.theta(q)), ("H's gradient", system.dH(q))):
                 bad = ~np.isfinite(values).reshape(q.shape[0], -1).all(axis=1)
@@ -845,6 +930,20 @@ def _check_points(scene, system):
             k = int(np.flatnonzero(bad)[0])
             raise SceneError(f"{what}: Ω̄ = dϑ is singular at point {k} = {q[k].tolist()} (condition number "
                              f"{cond[k]:.1e}); check system.theta")
+
+
+def _check_energy(system, q, what):
+    """A canonical phase space's system.energy at a set's points: (n,) finite values, or a one-line error."""
+    if system.energy is None:
+        return
+    try:
+        with np.errstate(all="ignore"):
+            e = system.H(q)
+    except Exception as exc:          # the user's function may raise anything: one line naming it
+        raise SceneError(f"{what}: system.energy failed: {type(exc).__name__}: {exc}") from None
+    bad = ~np.isfinite(e)
+    if bad.any():
+        raise SceneError(f"{what}: system.energy is not finite at point {int(np.flatnonzero(bad)[0])}")
 
 
 # (a tableau file is compared here by its label, the tableau's name: where the file lies may differ
