@@ -334,18 +334,22 @@ def _map_audit(args):
     maps, info = {}, None
     for spec in args.map:
         if spec in examples.EXAMPLES:
+            if args.theta is not None:
+                raise ValueError(f"--theta takes noncanonical maps step(q, h) -> q of your own; '{spec}' is a "
+                                 "shipped canonical example")
             step, info_k = examples.example(spec, args.k)
             info = info or info_k
         else:
             step = load_callable(spec, "step map", confined=False)
         maps[spec] = step
+    theta = None if args.theta is None else load_callable(args.theta, "--theta", confined=False)
     if args.point is not None:
-        point = _read_point(args.point)
-    elif info is not None:
+        point = _read_point(args.point, theta is not None)
+    elif info is not None and theta is None:
         point = info["point"]
     else:
-        raise ValueError("--map of your own needs --point: a .npz file with arrays x0 and v0, or file.py:function "
-                         "returning (x0, v0)")
+        raise ValueError("--map of your own needs --point: a .npz file with arrays x0 and v0 (with --theta: q0), "
+                         "or file.py:function returning (x0, v0) (with --theta: q0)")
     period = args.period if args.period is not None else (None if info is None else [info["period"]])
     if period is not None and len(period) == 1:
         period = period[0]
@@ -359,22 +363,26 @@ def _map_audit(args):
     if args.output_every is not None:
         kw["output_every"] = args.output_every
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    return audit_map(maps, point, h, progress=say, **kw)
+    return audit_map(maps, point, h, progress=say, theta=theta, **kw)
 
 
-def _read_point(spec):
-    """(x0, v0) from a .npz file (arrays x0, v0) or a file.py:function returning them."""
+def _read_point(spec, noncanonical=False):
+    """(x0, v0) from a .npz file (arrays x0, v0) or a file.py:function returning them; a
+    noncanonical map's q0 (array q0, or the function's return value)."""
     import numpy as np
     from .service.plugins import is_spec, load_callable
+    names = ("q0",) if noncanonical else ("x0", "v0")
     if spec.endswith(".npz"):
         try:
             with np.load(spec) as f:
-                return np.asarray(f["x0"], dtype=float), np.asarray(f["v0"], dtype=float)
+                got = tuple(np.asarray(f[n], dtype=float) for n in names)
         except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"--point '{spec}': cannot read arrays x0 and v0 ({type(exc).__name__}: {exc})") from None
+            raise ValueError(f"--point '{spec}': cannot read array{'s' if len(names) > 1 else ''} "
+                             f"{' and '.join(names)} ({type(exc).__name__}: {exc})") from None
+        return got[0] if noncanonical else got
     if is_spec(spec):
         got = load_callable(spec, "--point", confined=False)()
-        if not isinstance(got, (tuple, list)) or len(got) != 2:
+        if not noncanonical and (not isinstance(got, (tuple, list)) or len(got) != 2):
             raise ValueError(f"--point '{spec}' must return (x0, v0)")
         return got
     raise ValueError(f"--point must be a .npz file with arrays x0 and v0, or file.py:function, got '{spec}'")
@@ -547,6 +555,9 @@ def build_parser():
     mp.add_argument("--surface", type=int, nargs=2, default=None, metavar=("NS", "NT"),
                     help="also a surface of NS × NT Chebyshev points in the same plane (I₂)")
     mp.add_argument("--probes", type=int, default=8, help="probe pairs of the matrix-free defect (default 8)")
+    mp.add_argument("--theta", metavar="FILE.py:FUNCTION", default=None,
+                    help="a batched one-form theta(q) -> (n, d): the maps are then noncanonical step(q, h) -> q on "
+                         "(n, d) arrays and --point gives q0 (a .npz array q0, or a function returning it)")
     mp.add_argument("--output-every", type=int, default=None, help="steps between invariant outputs (default steps/50)")
     au.add_argument("--json", help="write the full report as JSON")
     au.add_argument("--plots", help="directory for the PNG plots")

@@ -121,6 +121,7 @@ class System:
         self._flow = flow
         self.q = tuple(q)
         self.d = len(self.q)
+        refuse_large(self.d, f"system {name}")
         if len(theta) != self.d:
             raise ValueError(f"system {name}: ϑ has {len(theta)} components for {self.d} coordinates")
         self.params = dict(params or {})
@@ -306,6 +307,27 @@ class System:
     def __repr__(self):
         p = ", ".join(f"{k}={v:g}" for k, v in self.param_values.items())
         return f"System({self.name}, d={self.d}{', ' if p else ''}{p})"
+
+
+MAX_FORMULA_DIMENSION = 160     # the largest d the formula route takes (docs/audit.md, "Symbolic systems of moderate size")
+
+
+def formula_seconds(d) -> float:
+    """The measured cost of the formula route for d coordinates: sympy's derivatives (ϑ_q, ϑ_qq, H's
+    first and second) 63 s at d = 128 growing as d³ (25 s at 96, 7.5 s at 64), and the engine's
+    kernels compiled for that d (about 35 s each, real and complex step), on the 2-core machine."""
+    return 63.0 * (d / 128.0) ** 3 + 70.0
+
+
+def refuse_large(d, what="system"):
+    """ValueError in one line, before sympy differentiates anything, for a system of more than
+    MAX_FORMULA_DIMENSION coordinates: its derivatives alone would take minutes and gigabytes; such a
+    system is audited by its step map (integrators.audit.audit_map, poincare audit --map)."""
+    if d > MAX_FORMULA_DIMENSION:
+        raise ValueError(f"{what}: d = {d} coordinates is too large for formulas (the derivatives and kernels "
+                         f"would take about {formula_seconds(d) / 60:.0f} min; at most d = {MAX_FORMULA_DIMENSION}): "
+                         "audit its step map instead (poincare audit --map, or a scene with "
+                         "system.degrees_of_freedom; docs/audit.md)")
 
 
 def system_from(theta, H, q, name="user", params=None, symmetry=None, domain=(), defaults=None, momentum=None):

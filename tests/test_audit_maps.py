@@ -160,3 +160,98 @@ def test_the_surface_in_the_loops_plane():
         assert abs(d["I2/canonical"]["value_at_start"] + 4e-4) < 1e-13 * 4e-4
     assert out["strang"]["I1/canonical"]["verdict"] == out["strang"]["I2/canonical"]["verdict"] == "round-off"
     assert out["rk2"]["I2/canonical"]["max_error"] > 1e-4 and out["rk2"]["I1/canonical"]["max_error"] > 1e-4
+
+
+NONCANONICAL = '''import numpy as np
+
+K = 4                           # q = (x_0 … x_3, y_0 … y_3), ϑ = (0, x + x³/3): dϑ = Σ (1 + x_i²) dx_i ∧ dy_i
+
+
+def theta(q):
+    x = q[:, :K]
+    return np.concatenate([np.zeros_like(x), x + x ** 3 / 3], axis=1)
+
+
+def kick(q, h):
+    """y_i += h ∂_i V/(1 + x_i²), V = Σ cos x_i + Σ cos(x_i − x_{i+1}): the exact flow of a potential,
+    symplectic for dϑ (g_i F_i = ∂_i V)."""
+    x, y = q[:, :K], q[:, K:]
+    dV = -np.sin(x) - np.sin(x - np.roll(x, -1, axis=1)) + np.sin(np.roll(x, 1, axis=1) - x)
+    return np.concatenate([x, y + h * dV / (1 + x ** 2)], axis=1)
+
+
+def euler_drift(q, h):
+    """x_i += h y_i/(1 + x_i²): explicit Euler on the flow of Σ y²/2, not symplectic (defect h²)."""
+    x, y = q[:, :K], q[:, K:]
+    return np.concatenate([x + h * y / (1 + x ** 2), y], axis=1)
+
+
+def q0():
+    return np.array([0.3, -0.2, 0.5, 0.1, 0.4, 0.2, -0.3, 0.6])
+'''
+
+
+def _noncanonical(tmp_path=None, k=4):
+    ns = {}
+    exec(NONCANONICAL.replace("K = 4 ", f"K = {k} "), ns)
+    return ns
+
+
+@pytest.mark.parametrize("k", [4, 40])
+def test_a_noncanonical_map_with_a_one_form_of_code(k):
+    """theta=ϑ(q) and maps step(q, h) -> q (no System): on dϑ = Σ (1 + x_i²) dx_i ∧ dy_i the kick (the
+    exact flow of a potential) keeps ∮ ϑ·dq at round-off with a defect at the complex-step floor; an
+    Euler drift moves I₁ and its defect falls as h² (fitted order within 0.3 of 2).  d = 8 takes the
+    dense defect, d = 80 the probes."""
+    ns = _noncanonical(k=k)
+    z0 = np.concatenate([np.linspace(-0.4, 0.5, k), np.linspace(0.3, -0.2, k)])
+    rep = audit_map({"kick": ns["kick"], "euler": ns["euler_drift"]}, z0, 0.05, steps=40, loop_points=128,
+                    radius=0.05, theta=ns["theta"], plane=(0, k))
+    kick, euler = rep["candidates"]
+    assert kick["drift"]["I1/noncanonical"]["verdict"] == "round-off"
+    assert kick["defect"]["noncanonical"]["verdict"] == "symplectic"
+    assert max(kick["defect"]["noncanonical"]["defect"]) < 1e-14
+    assert euler["drift"]["I1/noncanonical"]["max_error"] > 1e-6
+    assert euler["defect"]["noncanonical"]["verdict"] == "not symplectic"
+    assert abs(euler["defect"]["noncanonical"]["order"] - 2.0) < 0.3
+    assert ("dense" in kick["jacobian"]) == (k == 4) and "complex step" in kick["jacobian"]
+    # I₁ at t = 0: ∮ ϑ·dq of a circle of radius r in (x_0, y_0) = ∫∫ (1 + x²) over the disc (Green)
+    x0, r = z0[0], 0.05
+    assert abs(kick["drift"]["I1/noncanonical"]["value_at_start"] - np.pi * r ** 2 * (1 + x0 ** 2 + r ** 2 / 4)) < 1e-15
+
+
+def test_the_noncanonical_route_on_a_canonical_map_gives_the_canonical_defect():
+    """ϑ(q) = (v, 0) with step(q, h) = Φ(x, v): the same defects as the canonical route (dense and
+    probes), to 1e-10 relative; a surface takes Ω from ϑ's JVPs: I₂ of the square is −(2r)²."""
+    step, point, info = _pendula(8, "rk2")
+    k = 8
+
+    def theta(q):
+        return np.concatenate([q[:, k:], np.zeros_like(q[:, k:])], axis=1)
+
+    def flat(q, h):
+        return np.concatenate(step(q[:, :k], q[:, k:], h), axis=1)
+    z = np.concatenate(point)[None]
+    for dense in (True, False):
+        a = map_defect(step, z, 0.1, dense=dense)[0]
+        b = map_defect(flat, z, 0.1, dense=dense, theta=theta)[0]
+        assert abs(a - b) <= 1e-10 * a, (dense, a, b)
+    rep = audit_map(flat, z[0], 0.1, steps=2, loop_points=64, radius=0.1, surface=(12, 12), theta=theta,
+                    plane=(0, k), period=[2 * np.pi] * k + [0] * k)
+    c = rep["candidates"][0]
+    assert abs(c["drift"]["I2/noncanonical"]["value_at_start"] - (-(0.2 ** 2))) < 1e-14
+
+
+def test_poincare_audit_map_with_theta_from_the_command_line(tmp_path):
+    """`poincare audit --map m.py:kick m.py:euler_drift --theta m.py:theta --point m.py:q0`: the
+    verdicts in the JSON; --theta with a shipped (canonical) example is refused in one line."""
+    (tmp_path / "m.py").write_text(NONCANONICAL)
+    r = poincare("audit", "--map", "m.py:kick", "m.py:euler_drift", "--theta", "m.py:theta", "--point", "m.py:q0",
+                 "--h", "0.05", "--steps", "20", "--loop-points", "64", "--radius", "0.05", "--plane", "0", "4",
+                 "--json", "r.json", "-q", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert {c["name"]: c["defect"]["noncanonical"]["verdict"] for c in rep["candidates"]} == \
+        {"m.py:kick": "symplectic", "m.py:euler_drift": "not symplectic"}
+    r = poincare("audit", "--map", "pendula-strang", "--theta", "m.py:theta", "-q", cwd=tmp_path)
+    assert r.returncode != 0 and "shipped canonical example" in r.stderr and r.stderr.count("\n") == 1

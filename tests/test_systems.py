@@ -256,3 +256,26 @@ def test_sparse_second_derivatives_are_zeroed_by_a_loop_not_entry_by_entry():
     for n in range(1, 6):
         reference.advance(st, S, n * 0.1)
     assert np.max(np.abs(S.q - sol.q[-1])) < 1e-12
+
+
+def test_a_system_too_large_for_formulas_is_refused_before_sympy_differentiates(monkeypatch, tmp_path):
+    """d = 162 > MAX_FORMULA_DIMENSION: system_from and a scene's [system] table refuse it in one line
+    naming the map route, before any derivative is taken (sympy.diff made to fail proves it); d = 160
+    is not refused by the size check (issue 53, item 5)."""
+    import sympy
+    from integrators.service.scene import SceneError, parse_scene
+    from integrators.systems import MAX_FORMULA_DIMENSION, refuse_large
+    monkeypatch.setattr(sympy, "diff", lambda *a, **k: (_ for _ in ()).throw(AssertionError("differentiated")))
+    monkeypatch.setattr(sympy.Expr, "diff", lambda *a, **k: (_ for _ in ()).throw(AssertionError("differentiated")))
+    k = 81
+    x, v = sympy.symbols(f"x0:{k}"), sympy.symbols(f"v0:{k}")
+    with pytest.raises(ValueError, match=r"d = 162 .* too large for formulas.*poincare audit --map"):
+        integrators.system_from(list(v) + [0] * k, sum(vi ** 2 for vi in v), list(x) + list(v))
+    names = [f"x{i}" for i in range(k)] + [f"v{i}" for i in range(k)]
+    text = (f"[system]\nname = 'big'\ncoordinates = {names!r}\ntheta = {names[k:] + ['0'] * k!r}\nH = 'v0^2'\n"
+            "[loop]\nshape = 'ellipse'\npoints = 64\nparams = { d = 162 }\n"
+            "[run]\ntableaus = ['GLRK2']\nprojections = ['none']\nh = 0.1\nsteps = 1\n")
+    with pytest.raises(SceneError, match=r"system.coordinates: d = 162 .*system.degrees_of_freedom"):
+        parse_scene(text)
+    assert MAX_FORMULA_DIMENSION == 160
+    refuse_large(160)

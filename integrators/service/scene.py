@@ -740,9 +740,14 @@ def _system_from_table(spec, params):
     restricted parser (integrators.expressions): nothing in the file is ever executed."""
     import sympy
     from ..systems import system_from
+    from ..systems import refuse_large
     coords = spec["coordinates"]
     if not coords or not all(isinstance(c, str) and c.isidentifier() for c in coords):
         raise SceneError(f"system.coordinates must be a list of names, got {coords!r}")
+    try:
+        refuse_large(len(coords), "system.coordinates")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     if len(set(coords)) != len(coords):
         raise SceneError("system.coordinates lists a name twice")
     clash = sorted(set(coords) & set(params))
