@@ -243,10 +243,8 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=Non
     P = _periods(period, q.shape[1])
     r, ramp = (q, None) if P is None else _winding(q, P)
     qh = spectral.fourier_coefficients(r)
-    tail_q = spectral.loop_tail(r, qh)
-    # a jump of a wrapped coordinate is a discontinuity, whose spectrum already flags the set: the
-    # reason is sought only then (a third of the call's time at D = 2 otherwise)
-    reason = _jumps(r, P, (0,), closed=True) if tail_q > UNDER_RESOLVED else ""
+    aq = np.abs(qh)                    # shared by the monitor's readings
+    reason = None
     half = q.shape[0] % 2 == 0 and q.shape[0] // 2 >= MIN_POINTS    # the every-other-point subset
     qh2 = None
     out = {}
@@ -255,12 +253,17 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=Non
         if P is not None and form != "canonical":
             _check_periodic(lambda x: one_form_coefficients(x, form, system, p, lam, h)[0], q, P, "one-form")
         ah = spectral.fourier_coefficients(A)
+        aa = np.abs(ah)
         value = spectral.loop_pairing(A, r, bh=qh, ah=ah)        # in Fourier space (Parseval)
-        error, roundoff = spectral.loop_pairing_error(ah, qh, q.shape[0])
+        error, roundoff, tail_a, tail_q = spectral.loop_pairing_error(ah, qh, q.shape[0], absolute=(aa, aq), tails=True)
+        if reason is None:
+            # a jump of a wrapped coordinate is a discontinuity, whose spectrum already flags the set:
+            # the reason is sought only then (a third of the call's time at D = 2 otherwise)
+            reason = _jumps(r, P, (0,), closed=True) if tail_q > UNDER_RESOLVED else ""
         if ramp is not None and ramp.any():                    # the winding: ∮ A_i m P_i dτ, A's mean
             wind = np.abs(ramp) * np.max(np.abs(A), axis=0)
             value += np.sum(ramp * np.mean(A, axis=0))
-            error += spectral.loop_tail(A, ah) * np.sum(wind)
+            error += tail_a * np.sum(wind)
             roundoff += 8 * EPS * np.sum(wind)
         check = half and error > SUBSET_BELOW * abs(float(value))     # the subset's value, where it can matter
         if check:
@@ -280,7 +283,7 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=Non
         if check:             # two estimates that err large: the smaller is the sharper, and still errs large
             error = min(error, abs(float(value) - float(value2)))
         if form == "canonical":
-            res = max(res, spectral.loop_tail(p, ah))
+            res = max(res, tail_a)
         out[form] = _value(value, error, roundoff, res, reason)
     return out
 

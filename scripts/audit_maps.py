@@ -91,9 +91,18 @@ def scaling():
     return rows
 
 
+def time_one(fn):
+    """Seconds of one call of fn (after one warm-up call)."""
+    fn()
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
 def loop_cost():
     """The canonical I₁ of a 4,096-point loop with its monitor against the plain FFT loop integral (the
-    numpy one-liner: FFT, multiply by 2πik, inverse FFT, sum p·q'), best of 7 each, side by side."""
+    numpy one-liner: FFT, multiply by 2πik, inverse FFT, sum p·q'), side by side: best of 7 samples of
+    about 20 ms of back-to-back calls each (a single 0.1 ms call is timed with tens of % of jitter)."""
     import invariants
     rows = []
     N = 4096
@@ -113,12 +122,13 @@ def loop_cost():
         def ours():
             return invariants.first_invariant(q, "canonical", p=p).value
 
-        best = {}
+        best, calls = {}, max(1, int(0.02 / max(time_one(plain), 1e-6)))   # about 20 ms a sample
         for name, fn in (("plain", plain), ("ours", ours)) * 2:
             for _ in range(7):
                 t = time.perf_counter()
-                fn()
-                best[name] = min(best.get(name, np.inf), time.perf_counter() - t)
+                for _ in range(calls):
+                    fn()
+                best[name] = min(best.get(name, np.inf), (time.perf_counter() - t) / calls)
         rows.append(dict(N=N, D=D, plain_ms=best["plain"] * 1e3, ours_ms=best["ours"] * 1e3,
                          ratio=best["ours"] / best["plain"], agree=abs(plain() - ours()) / abs(plain())))
         print(f"N = {N}, D = {D:5d}: ours {best['ours'] * 1e3:7.2f} ms, plain {best['plain'] * 1e3:7.2f} ms, "
