@@ -363,7 +363,8 @@ def _map_audit(args):
     if args.output_every is not None:
         kw["output_every"] = args.output_every
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    return audit_map(maps, point, h, progress=say, theta=theta, **kw)
+    energy = None if args.energy is None else load_callable(args.energy, "--energy", confined=False)
+    return audit_map(maps, point, h, progress=say, theta=theta, energy=energy, **kw)
 
 
 def _read_point(spec, noncanonical=False):
@@ -555,6 +556,8 @@ def build_parser():
     mp.add_argument("--surface", type=int, nargs=2, default=None, metavar=("NS", "NT"),
                     help="also a surface of NS × NT Chebyshev points in the same plane (I₂)")
     mp.add_argument("--probes", type=int, default=8, help="probe pairs of the matrix-free defect (default 8)")
+    mp.add_argument("--energy", metavar="FILE.py:FUNCTION", default=None,
+                    help="a batched energy(x, v) -> (n,) (with --theta: energy(q)): the energy error in the report")
     mp.add_argument("--theta", metavar="FILE.py:FUNCTION", default=None,
                     help="a batched one-form theta(q) -> (n, d): the maps are then noncanonical step(q, h) -> q on "
                          "(n, d) arrays and --point gives q0 (a .npz array q0, or a function returning it)")

@@ -455,11 +455,11 @@ class MapEngine:
     is not finite or leaves the domain breaks down there, and a map that raises stops every live
     point at that step (one line on stderr).  Bits are the map's own business: a map that treats
     each point on its own gives the same file for any rank count.  On a canonical
-    :class:`~integrators.service.phase_space.PhaseSpace` the map is ``step(x, v, h) -> (x, v)``."""
+    phase space of black-box maps (integrators.service.phase_space) the map is ``step(x, v, h) -> (x, v)`` or ``step(q, h) -> q``."""
 
     def __init__(self, step, system, h, name="map"):
         if getattr(system, "black_box", False):
-            step = system.canonical_step(step)
+            step = system.engine_step(step)
         self.step, self.system, self.h, self.name = step, system, float(h), name
         self.nz = 0
 

@@ -255,3 +255,23 @@ def test_poincare_audit_map_with_theta_from_the_command_line(tmp_path):
         {"m.py:kick": "symplectic", "m.py:euler_drift": "not symplectic"}
     r = poincare("audit", "--map", "pendula-strang", "--theta", "m.py:theta", "-q", cwd=tmp_path)
     assert r.returncode != 0 and "shipped canonical example" in r.stderr and r.stderr.count("\n") == 1
+
+
+def test_the_energy_error_of_a_map_audit():
+    """energy=: the report's energy_error at each output is max |H − H(0)|/|H(0)| over the set's
+    points, as computed here by advancing the loop with the map itself (to 1e-15), below 1e-2 for
+    Strang on the pendula at h = 0.1; printed by text_report."""
+    from integrators.audit import text_report
+    from integrators.audit.maps import _loop, _plane
+    step, point, info = _pendula(8, "strang")
+    rep = audit_map(step, point, 0.1, steps=30, output_every=10, loop_points=64, radius=0.05,
+                    period=info["period"], energy=info["energy"])
+    e = rep["candidates"][0]["energy_error"]
+    z = _loop(np.concatenate(point), _plane(16, None, None), 0.05, 64)
+    H0 = info["energy"](z[:, :8], z[:, 8:])
+    for n in range(30):
+        x, v = step(z[:, :8], z[:, 8:], 0.1)
+        z = np.concatenate([x, v], axis=1)
+    want = np.max(np.abs(info["energy"](z[:, :8], z[:, 8:]) - H0) / np.abs(H0))
+    assert len(e) == 4 and e[0] == 0 and abs(e[-1] - want) <= 1e-15 * want and 0 < want < 1e-2
+    assert "energy" in text_report(rep)

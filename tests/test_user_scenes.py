@@ -356,7 +356,7 @@ def test_a_canonical_map_scene_without_the_period_is_under_resolved_not_wrong(tm
 
 @pytest.mark.parametrize("change, match", [
     (('tableaus = []', 'tableaus = ["GLRK2"]\nprojections = ["none"]'), "has no formula for the engine"),
-    (('h = 0.1', 'h = 0.1\nforms = ["canonical", "noncanonical"]'), "canonical form v·dx only"),
+    (("h = 0.1", "h = 0.1\nforms = [\"canonical\", \"noncanonical\"]"), "the canonical form only .v·dx."),
     (('h = 0.1', 'h = 0.1\ndiagnostics = ["constraint"]'), "energy error only"),
     (('period = 6.283185307179586', 'period = [1.0, 2.0]'), "2 entries for 6 positions"),
     (('period = 6.283185307179586', 'period = -1.0'), "system.period of coordinate 0"),
@@ -379,3 +379,88 @@ def test_the_builtin_canonical_map_scene_tells_strang_from_rk2(tmp_path):
     assert run["strang-map"].relative_error("I1", "canonical").max() < 1e-11
     assert run["rk2-map"].relative_error("I1", "canonical").max() > 1e-3
     assert all(run[k].resolved["I1"].all() for k in run.pairs)
+
+
+ONE_FORM = '''import numpy as np
+
+def theta(q):                      # ϑ = (0, x + x³/3): dϑ = (1 + x²) dx ∧ dy
+    return np.stack([np.zeros_like(q[:, 0]), q[:, 0] + q[:, 0] ** 3 / 3], axis=1)
+
+def energy(q):
+    return 0.5 * q[:, 1] ** 2 - np.cos(q[:, 0])
+
+def kick(q, h):                    # y += h ∂V/(1 + x²), V = cos x: the exact flow of a potential
+    return np.stack([q[:, 0], q[:, 1] - h * np.sin(q[:, 0]) / (1 + q[:, 0] ** 2)], axis=1)
+
+def euler_drift(q, h):             # x += h y/(1 + x²): explicit Euler, not symplectic for dϑ
+    return np.stack([q[:, 0] + h * q[:, 1] / (1 + q[:, 0] ** 2), q[:, 1]], axis=1)
+'''
+
+ONE_FORM_SCENE = '''name = "one_form"
+[system]
+name = "cubic"
+dimension = 2
+one_form = "of.py:theta"
+energy = "of.py:energy"
+
+[loop]
+shape = "ellipse"
+points = 64
+params = { d = 2, center = [0.3, 0.2], radii = [0.05, 0.05] }
+
+[surface]
+shape = "rectangle"
+n_sigma = 12
+n_tau = 12
+params = { d = 2, center = [0.3, 0.2], size = [0.1, 0.1] }
+
+[run]
+step_maps = ["of.py:kick", "of.py:euler_drift"]
+h = 0.05
+steps = 40
+output_every = 10
+store_points = true
+'''
+
+
+@pytest.mark.mpi
+def test_a_scene_of_maps_with_a_one_form_of_code(tmp_path):
+    """system.dimension + system.one_form: maps step(q, h) -> q with ϑ(q) of code (issue 53): the
+    noncanonical I₁ and I₂ at t = 0 are the formula route's (invariants.first/second_invariant with the
+    same ϑ written as formulas) to 1e-15; the kick keeps both at round-off, the Euler drift does not;
+    1 and 2 ranks write the same file; the form is ϑ·dq only."""
+    import sympy
+    import integrators
+    import invariants
+    from helpers import dump
+    (tmp_path / "of.py").write_text(ONE_FORM)
+    scene = tmp_path / "of.toml"
+    scene.write_text(ONE_FORM_SCENE)
+    for n, out in ((None, "one.h5"), (2, "two.h5")):
+        r = _poincare("run", str(scene), "-o", str(tmp_path / out), "-q", n=n, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    one, two = (dump(tmp_path / f, skip=("wall_clock", "checkpoint")) for f in ("one.h5", "two.h5"))
+    assert one.keys() == two.keys() and all(
+        np.array_equal(one[k], two[k], equal_nan=True) if k != "status" else one[k] == two[k] for k in one)
+    run = read_run(tmp_path / "one.h5")
+    x, y = sympy.symbols("x y", real=True)
+    sy = integrators.system_from(["0", "x + x^3/3"], "y^2/2 - cos(x)", [x, y])
+    sc = parse_scene(ONE_FORM_SCENE, str(scene))
+    i1 = invariants.first_invariant(sc.loop_points(), "noncanonical", system=sy).value
+    i2 = invariants.second_invariant(sc.surface_points(), "noncanonical", system=sy).value
+    kick, euler = run["kick-map"], run["euler_drift-map"]
+    assert abs(kick.I1["noncanonical"][0] - i1) < 1e-15 and abs(kick.I2["noncanonical"][0] - i2) < 1e-15
+    assert kick.relative_error("I1", "noncanonical").max() < 1e-13
+    assert kick.relative_error("I2", "noncanonical").max() < 1e-13
+    assert euler.relative_error("I1", "noncanonical").max() > 1e-5
+    ns = {}
+    exec(ONE_FORM, ns)
+    q0, qT = (np.concatenate([kick.points["loop"][i], kick.points["surface"][i].reshape(-1, 2)])
+              for i in (0, -1))                                       # the energy error: of.py's energy
+    H0 = ns["energy"](q0)
+    want = np.max(np.abs(ns["energy"](qT) - H0) / np.abs(H0))
+    assert kick.errors["energy"][0] == 0 and abs(kick.errors["energy"][-1] - want) <= 1e-15 * want
+    with pytest.raises(SceneError, match="noncanonical form only"):
+        parse_scene(ONE_FORM_SCENE.replace("h = 0.05", 'h = 0.05\nforms = ["canonical"]'), str(scene))
+    with pytest.raises(SceneError, match="system.dimension and system.one_form go together"):
+        parse_scene(ONE_FORM_SCENE.replace('one_form = "of.py:theta"\n', ""), str(scene))

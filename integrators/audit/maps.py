@@ -261,13 +261,17 @@ def _invariants(z, k, P, kind, theta=None):
 
 def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024, radius=0.1, plane=None,
               directions=None, surface=None, period=None, defect_points=4, levels=3, probes=PROBES,
-              method="auto", seed=0, name="map", progress=None, theta=None) -> dict:
+              method="auto", seed=0, name="map", progress=None, theta=None, energy=None) -> dict:
     """The whole audit of a canonical step map around the phase-space point ``point`` = (x0, v0).
 
     With ``theta``, a batched one-form ϑ(q) -> (n, d) (a degenerate Lagrangian ϑ(q)·q̇ − H(q) whose
     ϑ is code), the maps are noncanonical ``step(q, h) -> q`` on (n, d) arrays, ``point`` is q0 (1-D,
     length d), ``period`` one entry per coordinate, the default plane the coordinates (0, 1), and the
     form audited is dϑ (I₁ = ∮ ϑ·dq; a surface's I₂ takes Ω = Dϑᵀ − Dϑ, d JVPs a point: d ≤ 64).
+
+    ``energy``: a batched energy(x, v) -> (n,) (with ``theta``: energy(q)); the report's
+    ``energy_error`` is then max over the sets' points of |H − H(0)|/|H(0)| (|H − H(0)| where H(0) = 0)
+    at every output.
 
     step : ``step(x, v, h) -> (x, v)`` on (n, k) arrays, each row on its own (or a dict {name: step}:
         several maps audited on the same sets, in one report)
@@ -331,7 +335,7 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
                  "t": [], "errors": {}, "defect": {}, "jacobian": None}
         advance = _advance(s, k, h) if theta is None else _rows(s, h)
         _drift(entry, advance, sets, shapes, lambda part, key: _invariants(part, k, P, key, theta), form,
-               steps, h, every, progress)
+               steps, h, every, progress, _energy(energy, k, theta))
         entry["defect"], entry["jacobian"] = _defect_study(s, loop[sel], hs, probes, method, seed,
                                                            None if progress is None else
                                                            (lambda hk, nm=nm: progress(f"{nm}: one-step defect at h = {hk:g}")),
@@ -390,9 +394,24 @@ def _defect_study(step, z, hs, probes, method, seed, progress, theta=None):
             ", ".join(sorted(set(used))) + f" ({', '.join(sorted(kinds))})")
 
 
-def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progress):
+def _energy(energy, k, theta):
+    """The energy of rows z, checked: (n,) reals; or None."""
+    if energy is None:
+        return None
+    if not callable(energy):
+        raise TypeError(f"energy must be callable, got {type(energy).__name__}")
+
+    def H(z):
+        e = np.asarray(energy(z) if theta is not None else energy(z[:, :k], z[:, k:]))
+        if e.shape != (z.shape[0],) or e.dtype.kind not in "fiu":
+            raise ValueError(f"energy must return ({z.shape[0]},) real values, got shape {e.shape} of {e.dtype}")
+        return e.astype(float)
+    return H
+
+
+def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progress, energy=None):
     """The sets advanced ``steps`` steps by ``advance(z) -> z`` (rows), ``invariant(part, key)`` at
-    every output: the entry's drift, errors and breakdown step."""
+    every output (and ``energy(z)``): the entry's drift, errors, energy error and breakdown step."""
     from invariants.growth import growth_law
     from ..service.statuses import relative_error
     z = np.concatenate([sets[key] for key in sets], axis=0)
@@ -406,6 +425,10 @@ def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progr
             res[key] = max(res[key], v.resolution)
 
     record(z)
+    if energy is not None:
+        H0 = energy(z)
+        scale = np.where(H0 != 0, np.abs(H0), 1.0)
+        entry["energy_error"] = [0.0]
     broke = None
     for n in range(1, steps + 1):
         with np.errstate(all="ignore"):
@@ -420,6 +443,8 @@ def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progr
         if n % every == 0 or n == steps:
             t.append(n * h)
             record(z)
+            if energy is not None:
+                entry["energy_error"].append(float(np.max(np.abs(energy(z) - H0) / scale)))
         if progress and n % every == 0:
             progress(f"step {n}/{steps}")
     t = np.array(t)

@@ -32,6 +32,11 @@ A scene file::
     period = 6.283185307179586            # optional: the positions' period (one number or one per x; 0: none)
     energy = "maps.py:energy"             # optional: batched energy(x, v) -> (n,), for the energy error
 
+    [system]                              # ... or d coordinates with a one-form of code (docs/systems.md)
+    dimension = 4                         # d; run.step_maps are then maps step(q, h) -> q on (n, d) arrays
+    one_form = "maps.py:theta"            # batched theta(q) -> (n, d): the Lagrangian ϑ(q)·q̇ − H(q)'s ϑ
+    period = [0.0, 6.283185307179586, 0.0, 0.0]   # optional, per coordinate; energy = "maps.py:H" (H(q) -> (n,))
+
     [loop]                                # optional: a closed loop of sample points
     shape = "guiding_centre"              # built-in shape, or "module:function" / "file.py:function": called as
                                           # f(tau, **params), tau the (N,) array j/N in [0, 1), returning (N, d)
@@ -370,7 +375,7 @@ _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
     "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
                "momentum": str, "domain": list, "function": str, "equilibrium": str, "cocos": int,
-               "degrees_of_freedom": int, "period": object, "energy": str},
+               "degrees_of_freedom": int, "dimension": int, "one_form": str, "period": object, "energy": str},
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
     "run": {"tableaus": list, "projections": list, "step_maps": list, "h": float, "steps": int, "output_every": int,
@@ -468,19 +473,22 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
 
 
 def _phase_space_records(system, run, maps, tabs):
-    """(forms, diagnostics) of a canonical phase space's scene: its maps only, the canonical form
-    only, the energy error where system.energy is given."""
+    """(forms, diagnostics) of a scene of black-box maps: its maps only, its one form (canonical v·dx,
+    or the noncanonical ϑ·dq of system.one_form), the energy error where system.energy is given."""
+    what = ("a canonical phase space (system.degrees_of_freedom)" if system.form == "canonical" else
+            "a system of step maps with a one-form of code (system.one_form)")
     if tabs or not maps:
-        raise SceneError("a canonical phase space (system.degrees_of_freedom) has no formula for the engine: give "
-                         "run.step_maps (canonical maps step(x, v, h) -> (x, v)) and run.tableaus = [] or none")
-    forms = _names(run.get("forms", ["canonical"]), FORMS, "run.forms")
-    if forms != ("canonical",):
-        raise SceneError("run.forms: a canonical phase space (system.degrees_of_freedom) has the canonical form "
-                         "v·dx only (its maps are canonical)")
+        contract = "step(x, v, h) -> (x, v)" if system.form == "canonical" else "step(q, h) -> q"
+        raise SceneError(f"{what} has no formula for the engine: give run.step_maps (maps {contract}) and "
+                         "run.tableaus = [] or none")
+    forms = _names(run.get("forms", [system.form]), FORMS, "run.forms")
+    if forms != (system.form,):
+        raise SceneError(f"run.forms: {what} has the {system.form} form only "
+                         f"({'v·dx' if system.form == 'canonical' else 'ϑ·dq'}), got {list(forms)}")
     energy = () if system.energy is None else ("energy",)
     diags = run.get("diagnostics", list(energy))
     if not isinstance(diags, list) or any(x not in energy for x in diags):
-        raise SceneError(f"run.diagnostics: a canonical phase space records {'the energy error only' if energy else 'none'}"
+        raise SceneError(f"run.diagnostics: {what} records {'the energy error only' if energy else 'none'}"
                          f" ({'system.energy is given' if energy else 'give system.energy for the energy error'}),"
                          f" got {diags!r}")
     return forms, tuple(dict.fromkeys(diags))
@@ -513,12 +521,12 @@ def _system_of(sysd, base):
     """[system]: (the System, its parameters, the user system's spec or {})."""
     if "equilibrium" in sysd:
         return _equilibrium_of(sysd, base)
-    if "degrees_of_freedom" in sysd:
+    if "degrees_of_freedom" in sysd or "dimension" in sysd or "one_form" in sysd:
         return _phase_space_of(sysd, base)
     for k in ("period", "energy"):
         if k in sysd:
-            raise SceneError(f"system.{k} belongs to system.degrees_of_freedom (a canonical phase space given by "
-                             "step maps)")
+            raise SceneError(f"system.{k} belongs to a system given by step maps (system.degrees_of_freedom, or "
+                             "system.dimension with system.one_form)")
     if "cocos" in sysd:
         raise SceneError("system.cocos belongs to system.equilibrium (a G-EQDSK file)")
     user = any(k in sysd for k in ("coordinates", "function"))
@@ -565,25 +573,34 @@ def _equilibrium_of(sysd, base):
 
 
 def _phase_space_of(sysd, base):
-    """[system] degrees_of_freedom = k (period = P, energy = "file.py:function"): the canonical phase
-    space (x, v) of dimension 2k of black-box maps (integrators.service.phase_space); run.step_maps are
-    canonical maps step(x, v, h) -> (x, v)."""
-    for k in ("coordinates", "theta", "H", "symmetry", "momentum", "domain", "function", "cocos", "params"):
+    """[system] of black-box maps (integrators.service.phase_space): degrees_of_freedom = k, the
+    canonical phase space (x, v) of dimension 2k, run.step_maps canonical maps step(x, v, h) -> (x, v);
+    or dimension = d with one_form = "file.py:theta", run.step_maps maps step(q, h) -> q.  Both take
+    period = P and energy = "file.py:function"."""
+    canonical = "degrees_of_freedom" in sysd
+    key = "system.degrees_of_freedom" if canonical else "system.dimension"
+    for k in ("coordinates", "theta", "H", "symmetry", "momentum", "domain", "function", "cocos", "params") + \
+            (("dimension", "one_form") if canonical else ()):
         if k in sysd:
-            raise SceneError(f"system.{k} cannot go with system.degrees_of_freedom (a canonical phase space has "
-                             "no formula: its maps are code, run.step_maps)")
-    k = sysd["degrees_of_freedom"]
-    if k < 1:
-        raise SceneError(f"system.degrees_of_freedom must be a positive number of degrees of freedom, got {k}")
+            raise SceneError(f"system.{k} cannot go with {key} (a system of step maps has no formula: its maps "
+                             "are code, run.step_maps)")
+    if not canonical and not ("dimension" in sysd and "one_form" in sysd):
+        raise SceneError("system.dimension and system.one_form go together (d coordinates and the batched "
+                         "theta(q) -> (n, d) of maps step(q, h) -> q)")
+    k = sysd["degrees_of_freedom" if canonical else "dimension"]
+    if k < (1 if canonical else 2):
+        raise SceneError(f"{key} must be a positive number{'' if canonical else ' ≥ 2'}, got {k}")
     period = sysd.get("period")
     if period is not None:
         if isinstance(period, list):
             if len(period) != k:
-                raise SceneError(f"system.period has {len(period)} entries for {k} positions (give one number, or "
-                                 "one per position, 0 where not periodic)")
+                raise SceneError(f"system.period has {len(period)} entries for {k} "
+                                 f"{'positions' if canonical else 'coordinates'} (give one number, or one per "
+                                 f"{'position' if canonical else 'coordinate'}, 0 where not periodic)")
         elif isinstance(period, bool) or not isinstance(period, (int, float)):
             raise SceneError(f"system.period must be a number or a list of them, got {period!r}")
-    spec = {key: sysd[key] for key in ("name", "degrees_of_freedom", "period", "energy") if key in sysd}
+    spec = {key: sysd[key] for key in ("name", "degrees_of_freedom", "dimension", "one_form", "period", "energy")
+            if key in sysd}
     return _make_system(spec, {}, base), {}, spec
 
 
@@ -707,10 +724,13 @@ def _make_system(spec, params, base):
             raise SceneError(f"system.equilibrium: {exc}") from None
         except ValueError as exc:
             raise SceneError(f"system.params: {exc}") from None
-    if "degrees_of_freedom" in spec:
-        from .phase_space import PhaseSpace
+    if "degrees_of_freedom" in spec or "one_form" in spec:
+        from .phase_space import OneFormSpace, PhaseSpace
         energy = _load(spec["energy"], "system.energy", base) if "energy" in spec else None
         try:
+            if "one_form" in spec:
+                return OneFormSpace(spec["dimension"], _load(spec["one_form"], "system.one_form", base),
+                                    spec.get("name", "one-form"), spec.get("period"), energy)
             return PhaseSpace(spec["degrees_of_freedom"], spec.get("name", "canonical"), spec.get("period"), energy)
         except ValueError as exc:
             raise SceneError(f"system.{exc}") from None
