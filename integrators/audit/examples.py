@@ -78,6 +78,23 @@ def landau_start(N, L, alpha=0.01, mode=1, seed=1):
     return _wrap(x, L), rng.standard_normal(N)
 
 
+def bspline_shape(x, dx, M, degree):
+    """Per particle (..., N): its cell j = ⌊x/Δ⌋ mod M and, for each node j + o of its support
+    (o in 0, 1 for degree 1; −1 … 2 for degree 3), the B-spline shape S((x − X_{j+o})/Δ) and S' there,
+    as polynomials of f = x/Δ − ⌊x/Δ⌋ ∈ [0, 1) (analytic in f, so complex-step safe; the floor from
+    the real part)."""
+    xs = x / dx
+    fl = np.floor(np.real(xs))
+    f = xs - fl
+    j = fl.astype(np.int64) % M
+    if degree == 1:
+        return j, (1 - f, f), (-np.ones_like(f), np.ones_like(f))
+    g, f2 = 1 - f, f * f
+    f3 = f2 * f
+    return j, (g * g * g / 6, (3 * f3 - 6 * f2 + 4) / 6, (-3 * f3 + 3 * f2 + 3 * f + 1) / 6, f3 / 6), \
+        (-g * g / 2, (3 * f2 - 4 * f) / 2, (-3 * f2 + 2 * f + 1) / 2, f2 / 2)
+
+
 def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"):
     """A 1-D electrostatic PIC step (electrons, charge −1 and mass 1 in total, ions a fixed background):
     (step, info).  Positions on [0, L) (period L); ``degree`` 1 or 3; ``method`` 'strang' or 'rk2'."""
@@ -95,19 +112,7 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
     E = M + 3                             # nodes with ghosts: node m of the support at column m + 1
 
     def _shape(x):
-        """Per particle (..., N): its cell j = ⌊x/Δ⌋ mod M and, for each node j + o of its support, the
-        shape S((x − X_{j+o})/Δ) and S' there, as polynomials of f = x/Δ − ⌊x/Δ⌋ ∈ [0, 1) (analytic in
-        f, so complex-step safe; the floor from the real part)."""
-        xs = x / dx
-        fl = np.floor(np.real(xs))
-        f = xs - fl
-        j = fl.astype(np.int64) % M
-        if degree == 1:
-            return j, (1 - f, f), (-np.ones_like(f), np.ones_like(f))
-        g, f2 = 1 - f, f * f
-        f3 = f2 * f
-        return j, (g * g * g / 6, (3 * f3 - 6 * f2 + 4) / 6, (-3 * f3 + 3 * f2 + 3 * f + 1) / 6, f3 / 6), \
-            (-g * g / 2, (3 * f2 - 4 * f) / 2, (-3 * f2 + 2 * f + 1) / 2, f2 / 2)
+        return bspline_shape(x, dx, M, degree)
 
     def _deposit(x, shape=None):
         """The electrons' charge density at the nodes for each row of positions x (n, N): (n, M).

@@ -323,11 +323,7 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
               f"noncanonical map with a one-form of code, d = {n}",
               "thresholds": {"roundoff": ROUNDOFF, "resolved": RESOLVED, "defect_floor": DEFECT_FLOOR},
               "defect_points": loop[sel].tolist() if n <= 64 else f"{len(sel)} points of the loop",
-              "sets": {"loop": {"points": int(loop_points), "radius": float(radius),
-                                "plane": "all x against all v" if plane is None and directions is None
-                                else (list(plane) if plane is not None else "given directions")},
-                       "surface": None if surface is None else {"n_sigma": int(surface[0]), "n_tau": int(surface[1])},
-                       "period": None if P is None else P.tolist()},
+              "sets": _sets_description(loop_points, radius, plane, directions, surface, P, theta is None),
               "discrimination": None,       # the canonical form is not constant along a general map
               "candidates": []}
     for nm, s in maps.items():
@@ -342,6 +338,15 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
                                                            theta)
         report["candidates"].append(entry)
     return report
+
+
+def _sets_description(loop_points, radius, plane, directions, surface, P, canonical):
+    """The report's "sets": the loop, the surface and the periods, as the user gave them."""
+    where = (list(plane) if plane is not None else "given directions" if directions is not None else
+             "all x against all v" if canonical else [0, 1])
+    return {"loop": {"points": int(loop_points), "radius": float(radius), "plane": where},
+            "surface": None if surface is None else {"n_sigma": int(surface[0]), "n_tau": int(surface[1])},
+            "period": None if P is None else P.tolist()}
 
 
 def _start(point, theta):
