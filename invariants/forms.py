@@ -161,7 +161,7 @@ def _check(q, ndim, what):
                 f" (the layout is {layout})")
         raise ValueError(f"{what} has shape {q.shape}: at least {MIN_POINTS} points along each direction are needed "
                          f"for a spectral value, got {min(few)}{hint}")
-    if not np.all(np.isfinite(q)):
+    if not np.isfinite(q).all():
         raise ValueError(f"{what} contains non-finite values")
     return q
 

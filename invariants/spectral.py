@@ -140,49 +140,99 @@ def tail_model(c, axis=0, medians=False, slow=0.5):
     return tail_models([np.moveaxis(np.asarray(c), axis, 0)], medians, slow)[0][:3]
 
 
-NARROW = 16          # columns below which the spectra are read on one contiguous transposed copy
+NARROW = 16          # columns below which the spectra's envelopes are read by a compiled loop
 
 
 def tail_models(cs, medians=False, slow=0.5):
     """:func:`tail_model` of several spectra (modes on axis 0, the same number of modes), the same
     numbers as one call each, with each column's largest coefficient from ``top`` on and overall:
-    [(top, tau, r, top's maximum, peak)].  A few columns in all (< NARROW) are read together on one contiguous
-    transposed copy: numpy's reductions along a long axis 0 of a narrow array run an element at a
-    time (46 µs against 2 µs for the maximum of 2,049 × 2)."""
+    [(top, tau, r, top's maximum, peak)].  A few columns in all (< NARROW) have their envelopes read
+    by one compiled pass (:func:`_envelope_columns`): numpy's reductions along a long axis 0 of a
+    narrow array run an element at a time (46 µs against 2 µs for the maximum of 2,049 × 2), and a
+    dozen numpy calls on them cost more than the arithmetic."""
     K = cs[0].shape[0] - 1
     top = max(1, K - max(K // 8, 2))
     k1 = min(max(1, K // 2), top - 1) if top > 1 else 0
     k3 = min((k1 + top) // 2, top - 1) if top > 1 else 0
-    if all(c.ndim == 2 for c in cs) and sum(c.shape[1] for c in cs) < NARROW:
-        ct = np.empty((sum(c.shape[1] for c in cs), K + 1))        # (columns, K + 1), C-contiguous
-        lo = 0
-        for c in cs:
-            ct[lo:lo + c.shape[1]] = c.T
-            lo += c.shape[1]
-        got = _tail(lambda a, b: np.max(ct[:, a:b], axis=1), lambda a, b: np.median(ct[:, a:b], axis=1),
-                    K, top, k1, k3, medians, slow)
+    cols = sum(c.shape[1] if c.ndim == 2 else NARROW for c in cs)
+    if not medians and cols < NARROW:
+        env = np.empty((4, cols))
+        if len(cs) == 2:                             # (the aliasing estimate's two factors: one call)
+            _envelope_pair(np.asarray(cs[0], dtype=float), np.asarray(cs[1], dtype=float), top, k1, k3, env)
+        else:
+            lo = 0
+            for c in cs:
+                _envelope_columns(np.asarray(c, dtype=float), top, k1, k3, env, lo)
+                lo += c.shape[1]
+        tau, ratio = _tau_ratio(env)                 # the model's comparisons and division, compiled
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.clip(ratio ** (slow / max(top - k1, 1)), 0.0, 1.0)
         out, lo = [], 0
         for c in cs:
-            out.append((top,) + tuple(x[lo:lo + c.shape[1]] for x in got))
-            lo += c.shape[1]
+            hi = lo + c.shape[1]
+            out.append((top, tau[lo:hi], r[lo:hi], env[0, lo:hi], env[3, lo:hi]))
+            lo = hi
         return out
-    return [(top,) + _tail(lambda a, b, c=c: np.max(c[a:b], axis=0), lambda a, b, c=c: np.median(c[a:b], axis=0),
-                           K, top, k1, k3, medians, slow) for c in cs]
+    return [(top,) + _tail(c, K, top, k1, k3, medians, slow) for c in cs]
 
 
-def _tail(seg, med, K, top, k1, k3, medians, slow):
+@njit(cache=True, error_model="numpy")
+def _envelope_columns(c, top, k1, k3, env, lo):
+    """env[:, lo + i] = the envelope max(c[m:, i]) of column i at m = top, k3, k1, 0 (rows 0 … 3);
+    a NaN wins, as in numpy's maximum."""
+    K1 = c.shape[0]
+    for i in range(c.shape[1]):
+        m = c[K1 - 1, i]
+        for row, (a, b) in enumerate(((top, K1 - 1), (k3, top), (k1, k3), (0, k1))):
+            for n in range(a, b):
+                v = c[n, i]
+                if v > m or v != v:
+                    m = v
+            env[row, lo + i] = m
+
+
+@njit(cache=True, error_model="numpy")
+def _envelope_pair(a, b, top, k1, k3, env):
+    """:func:`_envelope_columns` of a, then of b beside it."""
+    _envelope_columns(a, top, k1, k3, env, 0)
+    _envelope_columns(b, top, k1, k3, env, a.shape[1])
+
+
+@njit(cache=True, error_model="numpy")
+def _tau_ratio(env):
+    """(tau, ratio) of :func:`_model` from the envelope rows e_top, e3, e1, peak: the same
+    comparisons and the same division, element by element."""
+    n = env.shape[1]
+    tau, ratio = np.empty(n), np.empty(n)
+    for i in range(n):
+        e_top, e3, e1, peak = env[0, i], env[1, i], env[2, i], env[3, i]
+        noise = (e_top <= ROUNDOFF_FLOOR * peak) or (e3 < FLAT * e_top)
+        tau[i] = 0.0 if noise else e_top
+        ratio[i] = tau[i] / e1 if e1 > 0 else 0.0
+    return tau, ratio
+
+
+def _tail(c, K, top, k1, k3, medians, slow):
     """(tau, r) of :func:`tail_model`, the largest coefficient from ``top`` on and the largest of all,
-    from the maxima ``seg(a, b)`` and medians ``med(a, b)`` of the modes a … b − 1 of each column."""
+    of the spectra c (modes on axis 0)."""
     # the envelope at the three modes the model reads, env[i] = max(c[i:]), from maxima of the
     # segments between them (the same numbers as the whole running maximum, at a fraction of its cost)
+    def seg(a, b):
+        return np.max(c[a:b], axis=0)
     e_top = seg(top, K + 1)
     e3 = np.maximum(seg(k3, top), e_top) if k3 < top else e_top
     e1 = np.maximum(seg(k1, k3), e3) if k1 < k3 else e3
     peak = np.maximum(seg(0, k1), e1) if k1 > 0 else e1
+    flat = None
     if medians:                          # robust to one large coefficient of a noise floor
-        flat = (med(k3, top) < FLAT * med(top, K + 1)) | (e1 < FLAT * e_top)
-    else:
-        flat = e3 < FLAT * e_top
+        flat = (np.median(c[k3:top], axis=0) < FLAT * np.median(c[top:], axis=0)) | (e1 < FLAT * e_top)
+    return _model(e_top, e3, e1, peak, top, k1, flat, slow)
+
+
+def _model(e_top, e3, e1, peak, top, k1, flat, slow):
+    """(tau, r, e_top, peak) of :func:`tail_model` from the envelope at top, k3, k1 and 0 (``flat``:
+    the medians' reading, or None for the envelope's)."""
+    flat = e3 < FLAT * e_top if flat is None else flat
     noise = (e_top <= ROUNDOFF_FLOOR * peak) | flat
     tau = np.where(noise, 0.0, e_top)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -217,14 +267,14 @@ def loop_pairing_error(ah, bh, N, absolute=None, tails=False):
     e = 0.0
     pos_a, pos_b = tau_a > 0, tau_b > 0                         # columns whose tail is a spectrum
     for tau, r, t0, other, pos in ((tau_a, r_a, ta, B, pos_a), (tau_b, r_b, tb, A, pos_b)):
-        if np.any(pos):
+        if pos.any():
             live = np.flatnonzero(np.ravel(pos))
             sel = (slice(1, None), live) if A.ndim == 2 else (slice(1, None),)
             tl, rl = (np.ravel(tau)[live], np.ravel(r)[live]) if A.ndim == 2 else (tau, r)
             e += float(np.sum(k * other[sel] * (tl * rl ** (m - t0))))
-    ro = 8.0 * np.finfo(float).eps * np.sum(k * A[1:] * B[1:])    # the sum's round-off: 8 ulps of its terms' size
+    ro = 8.0 * _EPS * np.sum(k * A[1:] * B[1:])                 # the sum's round-off: 8 ulps of its terms' size
     # modes beyond K: Σ_{m>K} m α_a(m) α_b(m), at most K + 1 terms of the geometric tail counted
-    if np.any(pos_a & pos_b):                # (else every term is 0: e + 0 is e)
+    if (pos_a & pos_b).any():                # (else every term is 0: e + 0 is e)
         rr = r_a * r_b
         g = np.minimum(np.where(rr < 1, 1.0 / np.where(rr < 1, 1.0 - rr, 1.0), K + 1.0), K + 1.0)
         beyond = (K + 1) * tau_a * r_a ** (K + 1 - ta) * tau_b * r_b ** (K + 1 - tb) * g * 2.0
@@ -236,8 +286,11 @@ def loop_pairing_error(ah, bh, N, absolute=None, tails=False):
 
 def _reading(top, peak):
     """:func:`loop_tail` from the columns' largest top coefficients and peaks (maxima: exact)."""
-    peak = np.max(peak)
-    return float(np.max(top) / peak) if peak > 0 else 0.0
+    peak = peak.max()
+    return float(top.max() / peak) if peak > 0 else 0.0
+
+
+_EPS = float(np.finfo(float).eps)
 
 
 @functools.lru_cache(maxsize=64)

@@ -131,7 +131,7 @@ def loop_cost():
                 best[name] = min(best.get(name, np.inf), (time.perf_counter() - t) / calls)
         rows.append(dict(N=N, D=D, plain_ms=best["plain"] * 1e3, ours_ms=best["ours"] * 1e3,
                          ratio=best["ours"] / best["plain"], agree=abs(plain() - ours()) / abs(plain())))
-        print(f"N = {N}, D = {D:5d}: ours {best['ours'] * 1e3:7.2f} ms, plain {best['plain'] * 1e3:7.2f} ms, "
+        print(f"N = {N}, D = {D:5d}: ours {best['ours'] * 1e3:8.3f} ms, plain {best['plain'] * 1e3:8.3f} ms, "
               f"ratio {rows[-1]['ratio']:.2f}; values agree to {rows[-1]['agree']:.1e}", flush=True)
     return rows
 

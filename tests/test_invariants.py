@@ -406,3 +406,24 @@ def test_a_surface_across_the_cut_of_a_periodic_coordinate():
     assert abs(r.value + 1.0) <= 1e-13 and not r.under_resolved
     bad = invariants.second_invariant(x, "canonical", p=v)
     assert bad.under_resolved and "jumps" in bad.reason
+
+
+def test_the_tail_models_of_narrow_spectra_are_the_numpy_paths_numbers():
+    """spectral.tail_models reads a few columns' envelopes by a compiled loop: the same numbers, bit
+    for bit, as the numpy path (segment maxima) for every K from 2 modes up, decaying and flat
+    spectra, one and several columns, and a NaN where numpy's maximum keeps it."""
+    from invariants import spectral
+    rng = np.random.default_rng(0)
+    for K1 in (3, 4, 5, 9, 33, 2049):
+        for D in (1, 2, 5):
+            A = np.abs(rng.standard_normal((K1, D))) * np.exp(-np.arange(K1))[:, None]
+            B = np.abs(rng.standard_normal((K1, D)))
+            if K1 > 5:
+                A[K1 // 3, 0] = np.nan
+            K = K1 - 1
+            top = max(1, K - max(K // 8, 2))
+            k1 = min(max(1, K // 2), top - 1) if top > 1 else 0
+            k3 = min((k1 + top) // 2, top - 1) if top > 1 else 0
+            for got, c in zip(spectral.tail_models([A, B]), (A, B)):
+                want = spectral._tail(c, K, top, k1, k3, False, 0.5)
+                assert got[0] == top and all(np.array_equal(x, y, equal_nan=True) for x, y in zip(got[1:], want))
