@@ -1,7 +1,7 @@
 """Double-double numbers for numba: a value is the unevaluated sum hi + lo of two doubles (|lo| ≤
 ½ ulp(hi)), about 32 significant digits with double's exponent range.
 
-This is the number type of the double-double engine (issue 41), written as a numba type so that
+This is the number type of the double-double engine, written as a numba type so that
 code written against ordinary operators runs on it unchanged: ``dd(hi, lo)`` makes one, ``.hi`` and
 ``.lo`` read it, and ``+ − × ÷``, unary ``−``, ``abs``, comparisons, ``np.sqrt`` and the functions
 the restricted parser accepts (integrators/expressions.py: ``exp log sin cos tan asin acos atan

@@ -1,7 +1,7 @@
 """The compiled step engine's kernel: (projected) VPRK steps of W points at once, in numba.
 
 Nothing here knows a system, a tableau or a projection by name.  The system enters as compiled
-point functions generated from its symbolic ϑ and H by :mod:`integrators.engine`:
+point functions generated from its symbolic ϑ and H by :mod:`integrators.codegen`:
 
     ev(q, k, need, th, T, TT, dH, HH)   ϑ, ϑ_q [k, i], ∇H and, when ``need``, ϑ_qq [k, i, j], ∇²H at q
     inside(q, k) -> bool                 q is finite and inside the system's domain (one point)
@@ -41,25 +41,17 @@ from numba.extending import overload
 
 from .ddouble import DDType, dd
 
+# where ϑ and its derivatives are evaluated (the point slots of the scratch and a projection's
+# `at`), and the perturbation before Ψ_h: codes owned by integrators.projections
+from .projections import END, MIDPOINT, PRE_NONE, PRE_PREVIOUS, PRE_UNKNOWN, START
 from .simd import DDVec, LanePtr, _at, anyl, at, elem, elem3, is_complex, ld, ldi, lget, lanes, lmask, lset, mand, \
     mnot, mor, nlanes, plain, put, put3, raw, re, sel, st, sti, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
 
-EPS = np.finfo(np.float64).eps
 COMPLEX_STEP = 1e-30    # the audit's complex-step size: imaginary parts are derivatives × this
-TOL = 4 * EPS           # converged when max |δ|/scale ≤ TOL
-STALL = 1e-10           # ... or when below STALL and the update no longer halves (round-off floor)
-STALL_COMPLEX = 1e-13   # complex step: a round-off floor counts only when it is a tight one
-MAXITER = 40            # (TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH: the defaults of
-#                         integrators.engine.Tolerances, which the kernel takes at run time)
-REFRESH = 0.01          # a fresh Jacobian when an iteration contracted by less than this factor.
-#                         (0.03 suited the numpy engine, whose Jacobians cost many numpy calls; compiled, a
-#                         fresh Jacobian is cheap enough that 0.01 is faster: GLRK1-none 8.0 -> 6.7 Newton
-#                         iterations per step and +9 % point-steps/s, GLRK2-symmetric 7.5 -> 6.5 and +3 %, on
-#                         guiding_centre_symmetric at h = 10; docs/benchmarks.md.  With lanes, 0.1 is faster
-#                         for s >= 2 (a refresh factorises all lanes), but it moves every documented result's
-#                         last bits: Tolerances(refresh=0.1) for now; docs/benchmarks.md.)
+# (Newton's tolerances, iteration limit and refresh threshold are run-time data: their one owner is
+# integrators.engine.Tolerances)
 
 LANES = 8               # W of the vector path: 8 doubles fill an AVX-512 register, two AVX2 ones
 WIDE = 16               # W for small Newton systems (nz <= WIDE_NZ, real states): two registers of
@@ -79,12 +71,6 @@ def lane_width(nz, n=WIDE_POINTS):
     return WIDE if nz <= WIDE_NZ and n >= WIDE_POINTS else LANES
 
 # -- the projection as the kernel reads it ------------------------------------------------------
-
-# where ϑ and its derivatives are evaluated: the point slots of the scratch (and a projection's `at`)
-START, MIDPOINT, END = 0, 1, 2
-# the perturbation before Ψ_h: none; Λ of this step, solved with the stages (symmetric, midpoint);
-# the last step's Λ (symplectic)
-PRE_NONE, PRE_UNKNOWN, PRE_PREVIOUS = 0, 1, 2
 
 Plan = namedtuple("Plan", "pre pre_at post post_at sigma lobatto")
 Plan.__doc__ = """A projection as the kernel reads it (made by Projection.plan): ``pre`` one of PRE_*,

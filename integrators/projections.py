@@ -1,4 +1,5 @@
-"""One step of a (projected) VPRK method, batched over points (sec:projection).
+"""The five projections of sec:projection as records: one row of the paper's table each, read by
+the compiled kernel (:mod:`integrators.kernel`) and by the numpy reference.
 
 With φ(q, p) = p − ϑ(q) the projection term h Ω⁻¹∇φᵀλ of eq:projector moves a
 point by (q, p) ↦ (q + hλ, p + h ϑ_q(x)ᵀλ), where x is where ϑ_q is evaluated.
@@ -32,8 +33,11 @@ import dataclasses
 
 PROJECTIONS = ("none", "standard", "symmetric", "symplectic", "midpoint")
 
-# where ϑ_q of a projection term is taken (codes shared with integrators.kernel)
+# where ϑ_q of a projection term is taken, and the perturbation before Ψ_h: none; Λ of this step,
+# solved with the stages (symmetric, midpoint); the last step's Λ (symplectic).  The codes the
+# kernel reads (integrators.kernel imports them from here)
 START, MIDPOINT, END = 0, 1, 2
+PRE_NONE, PRE_UNKNOWN, PRE_PREVIOUS = 0, 1, 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +70,7 @@ class Projection:
 
     def codes(self, tableau) -> tuple:
         """(pre, pre_at, post, post_at, σ) as the kernel reads them."""
-        pre = {"none": 0, "unknown": 1, "previous": 2}[self.pre]
+        pre = {"none": PRE_NONE, "unknown": PRE_UNKNOWN, "previous": PRE_PREVIOUS}[self.pre]
         at = {"start": START, "midpoint": MIDPOINT, "end": END}
         return (pre, at[self.pre_at], bool(self.post), at[self.post_at], self.sigma(tableau))
 

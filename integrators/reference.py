@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from integrators.engine import _lagrange_matrix
+from integrators.kernel import COMPLEX_STEP
 from integrators.projections import admission, projection_record
 
 
@@ -148,7 +149,6 @@ def stage_jacobian_shift(tab, st):
 
 
 EPS = np.finfo(float).eps
-COMPLEX_STEP = 1e-30   # the audit's complex-step size: imaginary parts are derivatives × this
 
 
 def invert_batched(J):
@@ -189,7 +189,7 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
     Newton's method with the exact Jacobian, kept while it works: the Jacobian is evaluated
     and inverted at the first iteration (unless the caller hands in an inverse from the last
     step, ``jinv``/``known``) and again for any point whose update shrank by less than the
-    factor ``refresh`` in its last iteration (default: the compiled kernel's ``REFRESH``, 0.01,
+    factor ``refresh`` in its last iteration (default: ``Tolerances.refresh``, 0.01, the compiled kernel's,
     so that the oracle takes the kernel's path).  Between refreshes an iteration costs one
     residual evaluation and a matrix–vector product.  Every decision is per point, so a
     point's iterates never depend on the rest of the batch.
@@ -223,7 +223,8 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
     tol = 4 * eps if tol is None else tol
     stall = 1e-10 * (eps / EPS) if stall is None else stall
     if refresh is None:                      # the compiled kernel's policy, so the oracle takes its path
-        from integrators.kernel import REFRESH as refresh
+        from integrators.engine import Tolerances
+        refresh = Tolerances.refresh
     z = z0.copy()
     n, nz = z.shape
     complex_step = np.iscomplexobj(z)

@@ -5,9 +5,12 @@
     r = service.read_run("run.h5")                   # the HDF5 file, as arrays (what run returns)
     ds = r.to_xarray()                               # labelled: ds.I2.sel(form="corrected")
 
-Modules: ``api`` (:func:`run` from Python), ``scene`` (scene files and their typed loop/surface specs), ``ranks`` (the communicator,
-threads per rank and the load balance), ``driver`` (the run), ``output`` (the one owner of the
-HDF5 format, reading and writing), ``plots``, ``plugins`` (a user's Python callables), ``cli``.
+Modules: ``api`` (:func:`run` from Python), ``scene`` (scene files and their typed loop/surface
+specs), ``phase_space`` (systems given by step maps only), ``ranks`` (the communicator, threads per
+rank and the load balance), ``driver`` (the run) with ``diagnostics``, ``tasks``, ``refine`` and
+``checkpoints``, ``output`` and ``writer`` (the HDF5 format, written), ``reader`` (read back),
+``resumable`` (what a resume may continue), ``statuses``, ``plots``, ``plugins`` (a user's Python
+callables), ``stop`` (signals and user code).  The command line is :mod:`integrators.cli`.
 """
 from .api import run, scene_text
 from .driver import PairSummary

@@ -75,9 +75,8 @@ A scene file::
                                           # and constraint errors in double-double; the invariants from
                                           # the states rounded to double.  Not with step_maps.
     jacobian_refresh = 0.01               # Newton takes a fresh Jacobian after an iteration that contracted
-                                          # by less than this (Tolerances.refresh; in (0, 1)).  0.1 ran
-                                          # GLRK2-, SRK3- and GLRK4-symmetric 1.4-1.7x faster on scattered
-                                          # points, GLRK1 0.83x; it changes every result's last bits
+                                          # by less than this (Tolerances.refresh; in (0, 1)).  Another
+                                          # value changes every result's last bits and the run's speed
                                           # (docs/benchmarks.md, "the levers that change bits")
 
     [output]
