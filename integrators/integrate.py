@@ -126,7 +126,7 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", h=None, steps
     tolerances : Newton's stopping and refresh rule (:class:`integrators.Tolerances`; default the
         engine's).  ``Tolerances(refresh=0.1)`` refreshes the Jacobian less often: one orbit of
         GLRK4- and GLRK6-symmetric 1.13x and 1.37x faster, GLRK1-none 0.90x, in last bits of its
-        own (docs/benchmarks.md, "the levers that change bits")
+        own (docs/benchmarks-history.md, "the levers that change bits")
 
     Returns
     -------

@@ -58,7 +58,7 @@ WIDE = 16               # W for small Newton systems (nz <= WIDE_NZ, real states
 WIDE_NZ = 12            # lanes, whose independent chains hide each other's latency in the LU and the
 #                         solve (GLRK1 and GLRK2 with any projection, SRK3 unprojected at d = 4);
 #                         above 12 unknowns 16 lanes' scratch outgrows the L1 cache and lose
-#                         (docs/benchmarks.md, "Sixteen lanes for small Newton systems").
+#                         (docs/benchmarks-history.md, "Sixteen lanes for small Newton systems").
 WIDE_POINTS = 1024      # ... and only for calls of at least this many points: a second width is a
 #                         second compilation of the kernel (~35 s a dimension), paid where a run is
 #                         long enough to gain it back, not by every small scene and test.

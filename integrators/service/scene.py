@@ -77,7 +77,7 @@ A scene file::
     jacobian_refresh = 0.01               # Newton takes a fresh Jacobian after an iteration that contracted
                                           # by less than this (Tolerances.refresh; in (0, 1)).  Another
                                           # value changes every result's last bits and the run's speed
-                                          # (docs/benchmarks.md, "the levers that change bits")
+                                          # (docs/benchmarks-history.md, "the levers that change bits")
 
     [output]
     path = "my-run.h5"
