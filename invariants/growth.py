@@ -188,3 +188,57 @@ def growth_law(t, e, roundoff=ROUNDOFF, windows=None):
         windows = max(MIN_WINDOWS, min(WINDOWS, int(np.sum(t > 0)) // 3))
     w, m = window_maxima(t, e, windows)
     return growth_law_of_maxima(w, m, roundoff, peak)
+
+
+# -- the classifier's validation set ----------------------------------------------------------------
+
+OSCILLATION = 0.1       # synthetic linear series: an oscillation up to this share of the final drift
+DRAWN = ("round-off", "bounded", "random walk", "linear", "faster")     # the laws synthetic series are drawn from
+
+
+def synthetic_series(law, rng, n=None):
+    """A synthetic error series (t, e) of a known law (one of :data:`DRAWN`), drawn from numpy's
+    generator ``rng`` with random parameters and 0–30 % multiplicative noise, n samples (default 200
+    to 4,000): the classifier's validation set (docs/growth.md; scripts/growth_laws.py)."""
+    n = int(rng.integers(200, 4001)) if n is None else n
+    t = np.arange(1, n + 1, dtype=float)
+    T = t[-1]
+    noise = 1 + rng.uniform(0, 0.3) * rng.standard_normal(n) if law not in ("round-off", "random walk") else 1.0
+    if law == "round-off":
+        if rng.random() < 0.5:
+            return t, np.abs(np.cumsum(10 ** rng.uniform(-16, -15) * rng.standard_normal(n)))
+        per = 10 ** rng.uniform(np.log10(2), np.log10(T / 3))
+        return t, 10 ** rng.uniform(-15, -12) * np.abs(np.sin(2 * np.pi * t / per + rng.uniform(0, 6.3)))
+    if law == "bounded":
+        per = 10 ** rng.uniform(np.log10(2), np.log10(T / 3))
+        A = 10 ** rng.uniform(-10, -2)
+        e = np.abs(np.sin(2 * np.pi * t / per + rng.uniform(0, 6.3)))
+        if rng.random() < 0.5:
+            e = np.abs(e + 0.5 * np.sin(2 * np.pi * t / (per * np.sqrt(2)) + rng.uniform(0, 6.3)))
+        return t, A * e * np.abs(noise)
+    if law == "random walk":
+        return t, np.abs(np.cumsum(10 ** rng.uniform(-10, -5) * rng.standard_normal(n)))
+    if law == "linear":
+        a = 10 ** rng.uniform(-12, -4)
+        per = 10 ** rng.uniform(np.log10(2), np.log10(T / 3))
+        b = rng.uniform(0, OSCILLATION) * a * T
+        return t, np.abs((a * t + b * np.sin(2 * np.pi * t / per)) * noise)
+    # faster
+    if rng.random() < 0.5:
+        lam = rng.uniform(4, 20) / T
+        return t, np.abs(10 ** rng.uniform(-14, -8) * np.expm1(lam * t) * noise)
+    a = 10 ** rng.uniform(-16, -8)
+    return t, np.abs(a * t ** 3 * (1 + 0.1 * np.sin(t)) * noise)
+
+
+def confusion(count, seed=0, samples=None):
+    """{drawn law: {classified law: count}} of ``count`` synthetic series of each law (numpy's
+    generator of ``seed``; ``samples`` points each, default 200 to 4,000): how often
+    :func:`growth_law` names each law."""
+    rng = np.random.default_rng(seed)
+    M = {d: {f: 0 for f in LAWS} for d in DRAWN}
+    for law in DRAWN:
+        for _ in range(count):
+            t, e = synthetic_series(law, rng, samples)
+            M[law][growth_law(t, e).law] += 1
+    return M

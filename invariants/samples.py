@@ -71,6 +71,25 @@ def band_limited_loop(n, center, modes=20, decay=0.7, scale=None, seed=1):
     return q
 
 
+def henon_loop(n, phase=0.0, a=1.4, b=0.3):
+    """PoincareInvariants.jl's test loop (n, 4): the unit circle in both (qᵢ, pᵢ) planes, sampled at
+    τ_j = (j + phase)/n, mapped twice by the 4-D Hénon map (two planar Hénon maps coupled through
+    the momenta).  The maps are symplectic, so ∮ p·dq = 2π exactly; the loop is a trigonometric
+    polynomial of degree 16 (resolved at any n > 32): an error of I₁ on it is round-off only."""
+    def henon(q, p):
+        p = 1 + p - a * q * q
+        q, p = b * q, p / b
+        return -p, q
+
+    def henon_4d(z):
+        q1, q2, p1, p2 = z.T
+        q1, p1 = henon(q1, p1)
+        q2, p2 = henon(q2, p2)
+        return np.stack([q1, q2, p1 - q2, p2 - q1], axis=-1)
+    tau = -2 * np.pi * (np.arange(int(n)) + phase) / int(n)
+    return henon_4d(henon_4d(np.stack([np.cos(tau), np.cos(tau), np.sin(tau), np.sin(tau)], axis=1)))
+
+
 def surface_parameters(n_sigma: int, n_tau: int):
     """Chebyshev points (σ, τ) on [0, 1]²: two arrays (n_σ, n_τ), σ along axis 0."""
     s, t = chebyshev_points(int(n_sigma)), chebyshev_points(int(n_tau))

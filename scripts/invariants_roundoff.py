@@ -11,26 +11,14 @@ For each N, 20 phases of the sampling τ_j = (j + φ)/N; the median and the larg
 import numpy as np
 
 import invariants
-from invariants import spectral
-
-
-def henon_4d(z, a=1.4, b=0.3):
-    def henon(q, p):
-        p = 1 + p - a * q * q
-        q, p = b * q, p / b
-        return -p, q
-    q1, q2, p1, p2 = z.T
-    q1, p1 = henon(q1, p1)
-    q2, p2 = henon(q2, p2)
-    return np.stack([q1, q2, p1 - q2, p2 - q1], axis=-1)
+from invariants import samples, spectral
 
 
 def errors(N, phases):
     canonical = lambda z: np.concatenate([z[:, 2:], np.zeros((len(z), 2))], axis=1)  # noqa: E731
     new, old = [], []
     for phase in phases:
-        tau = -2 * np.pi * (np.arange(N) + phase) / N
-        z = henon_4d(henon_4d(np.stack([np.cos(tau), np.cos(tau), np.sin(tau), np.sin(tau)], axis=1)))
+        z = samples.henon_loop(N, phase)
         new.append(abs(invariants.first_invariant(z, form=canonical).value - 2 * np.pi))
         trapezoid = spectral.loop_integral(np.sum(z[:, 2:] * spectral.loop_derivative(z)[:, :2], axis=1))
         old.append(abs(trapezoid - 2 * np.pi))

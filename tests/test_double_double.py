@@ -3,7 +3,7 @@ integrators/ddouble.py numbers, one point at a time).
 
 * one step of every admissible pair (Lobatto IIIA/IIIB with their constraint weights d too) on two systems (Lotka–Volterra: log; the massless
   charged particle: sin, cos) agrees with a 50-digit mpmath computation of the same equations
-  (tests/mp_oracle.py) to 1e-28;
+  (integrators/oracle.py) to 1e-28;
 * a point's bits do not depend on its block or the thread count;
 * below double's floor: GLRK3-standard's order 6 shows on errors under 1e-17;
 * ``integrate(..., precision="double-double")`` returns the low parts.
@@ -16,7 +16,7 @@ import integrators
 from integrators.ddouble import split, value
 from integrators.engine import Engine, State, set_threads
 from integrators.projections import PROJECTIONS, admission
-from mp_oracle import Oracle
+from integrators.oracle import Oracle
 
 SYSTEMS = {"lotka_volterra_2d": ([1.2, 0.9], 0.1), "massless_charged_particle": ([0.3, 0.2], 0.2)}
 TABLEAUS = ("GLRK1", "GLRK2", "GLRK3", "GLRK4", "SRK3", "RadIIA2", "RadIIA3", "LobIIIA2", "LobIIIA3", "LobIIIA4",

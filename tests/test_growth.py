@@ -1,16 +1,10 @@
 """The growth-law classifier (invariants.growth): closed-form series, onsets, populations of
 synthetic series, and the verdicts a run file, its summary and the audit carry."""
-import sys
-from pathlib import Path
-
 import h5py
 import numpy as np
 import pytest
 
 from invariants.growth import LAWS, ROUNDOFF, growth_law, growth_law_of_maxima
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
-
 
 T = np.arange(1, 2001, dtype=float)
 
@@ -68,12 +62,13 @@ def test_fitted_law_passes_through_the_window_maxima():
 
 
 def test_synthetic_populations_are_classified_as_validated():
-    """200 series of each law, drawn as scripts/growth_laws.py draws them (fixed seed): the share
+    """200 series of each law, drawn by invariants.growth.synthetic_series (fixed seed), as
+    scripts/growth_laws.py draws its 1,000: the share
     classified right is at least what docs/growth.md reports for 1,000 each, less a margin for
     the smaller sample (reported there: 100, 90, 65, 97, 99 %)."""
-    import growth_laws
-    M = growth_laws.confusion(200, seed=7)
-    share = {d: M[d][d] / 200 for d in growth_laws.DRAWN}
+    from invariants.growth import DRAWN, confusion
+    M = confusion(200, seed=7)
+    share = {d: M[d][d] / 200 for d in DRAWN}
     floor = {"round-off": 0.95, "bounded": 0.8, "random walk": 0.5, "linear": 0.9, "faster": 0.95}
     assert all(share[d] >= floor[d] for d in floor), share
     assert set(M["linear"]) <= set(LAWS)
