@@ -43,7 +43,7 @@ from .refine import Refiner
 from .stop import StopRequest, critical  # noqa: F401  (run's stop argument; tests make one)
 from .tasks import Batch, Output, Tasks
 from .transport import PARTS, PIECES, Transport
-from .writer import Replacement, Writer, close_quietly
+from .writer import Piece, Pieces, Replacement, Writer, close_quietly
 
 
 @dataclasses.dataclass
@@ -727,7 +727,7 @@ class _Stream:
         got = {r: self.transport.receive(r, PARTS) for r in self.tasks.others(rank, b.owners)}
         wait = time.perf_counter() - t0
         values = self.tasks.run(rank, b, got)      # got[r][k]: rank r's set k, stacked over the outputs
-        mine = [(x.errors, v, x.piece) for x, v in zip(b.held, values)]
+        mine = [Piece(x.errors, v, x.piece) for x, v in zip(b.held, values)]
         t1 = time.perf_counter()
         refine = sum(r.seconds for r in b.pair.refiners.values())
         clock["refine_point_steps"] = sum(r.point_steps for r in b.pair.refiners.values())
@@ -741,7 +741,7 @@ class _Stream:
         if b.last:
             clock["points"] = b.pair.block[1] - b.pair.block[0]
         rates = (self.current.name, self.rates_of(self.current))
-        self.transport.send((mine, rates, dict(clock) if b.last else None), 0, PIECES)
+        self.transport.send(Pieces(mine, rates, dict(clock) if b.last else None), 0, PIECES)
         self.spent.charge(clock, "gather", time.perf_counter() - t1)
 
     # -- rank 0: the file ---------------------------------------------------------------------------
@@ -754,13 +754,13 @@ class _Stream:
             w0 = time.perf_counter()
             msgs = [self.transport.receive(r, PIECES) for r in others]
             wait = time.perf_counter() - w0
-            self.planner.rates.update((r, m[1]) for r, m in zip(others, msgs))
+            self.planner.rates.update((r, m.rates) for r, m in zip(others, msgs))
             b.pair.clock["wait_recv"] += wait
             self.spent.charge(b.pair.clock, "gather", wait)
             with critical():            # (the stop watchdog never ends the process mid-write)
-                self.writer.write(b, [mine] + [m[0] for m in msgs])
+                self.writer.write(b, [mine] + [m.rows for m in msgs])
                 if b.last:
-                    self.planner.after_pair(self.writer.finish_pair(b.pair, [m[2] for m in msgs]))
+                    self.planner.after_pair(self.writer.finish_pair(b.pair, [m.clock for m in msgs]))
 
     def drain(self):
         """At the run's end: every queued task run, every batch written, every message delivered."""

@@ -11,10 +11,28 @@ from __future__ import annotations
 
 import os
 import time
+from typing import NamedTuple
 
 import numpy as np
 
 from . import checkpoints, output, statuses
+
+
+class Piece(NamedTuple):
+    """One rank's part of one output: the maxima of its points' errors, its tasks' invariant values
+    ({(invariant, form): …}), and its state piece (points, breakdown times, a checkpoint's state or
+    ``slab``)."""
+    errors: dict
+    values: dict
+    state: dict
+
+
+class Pieces(NamedTuple):
+    """What a rank sends rank 0 for a batch of outputs: a :class:`Piece` per output, its rates (pair
+    name, point-steps a second) and, with a pair's last batch, its clocks."""
+    rows: list
+    rates: tuple
+    clock: dict | None
 
 
 def concat(parts):
@@ -30,20 +48,21 @@ class Writer:
         self.started = None                # --force: called once the first rows are written
 
     def write(self, b, batches):
-        """The batch's rows from every rank's (errors, values, piece) at each output, written
-        together and flushed; the breakdown times when they changed, the state at a checkpoint."""
+        """The batch's rows from every rank's :class:`Piece` s at each output (``batches``: a list
+        per rank), written together and flushed; the breakdown times when they changed, the state at
+        a checkpoint."""
         scene, pair, t0 = self.scene, b.pair, time.perf_counter()
         rows = []
         for i, x in enumerate(b.held):
             parts = [r[i] for r in batches]
-            rows.append(pair.diagnostics.combine(x.step * scene.h, [p[0] for p in parts],
-                                                 {k: v for p in parts for k, v in p[1].items()}))
+            rows.append(pair.diagnostics.combine(x.step * scene.h, [p.errors for p in parts],
+                                                 {k: v for p in parts for k, v in p.values.items()}))
             if scene.store_points:
-                q = np.concatenate([p[2]["q"] for p in parts])
+                q = np.concatenate([p.state["q"] for p in parts])
                 for spec, sl in scene.sample_sets:
                     rows[-1][f"points/{spec.name}"] = q[sl].reshape(spec.grid + (q.shape[1],))
         last = b.held[-1]
-        full = concat([r[-1][2] for r in batches])
+        full = concat([r[-1].state for r in batches])
         bt = full["breakdown_time"]
         changed = pair.breakdown_written is None or not np.array_equal(bt, pair.breakdown_written)
         t1 = time.perf_counter()
@@ -55,7 +74,7 @@ class Writer:
             output.write_rows(self.f, pair.g, last.step, rows, bt if changed else None)
             if last.checkpoint:
                 checkpoints.link_checkpoint(self.f, pair.g, last.step,
-                                       [x for r in batches for x in r[-1][2]["slab"]], self.slabs)
+                                       [x for r in batches for x in r[-1].state["slab"]], self.slabs)
         pair.breakdown_written = bt
         if self.started is not None:
             self.started()
