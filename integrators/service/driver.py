@@ -473,8 +473,9 @@ def _run_pair(comm, stream, scene, system, q0, pair_, job, first, has_next, bar,
     lo, hi = blocks[rank]
     st = _starting_state(comm, engine, q0, blocks, saved, s_tab, h)
     t_start = time.perf_counter()
-    pair = _Pair(name, (lo, hi), Diagnostics(scene, system, q0[lo:hi]), clock, batch or 1, cadence or 1, t_start,
-                 stream.spent.snapshot(), start_step, (start_step + scene.steps) // 2,
+    pair = _Pair(name=name, block=(lo, hi), diagnostics=Diagnostics(scene, system, q0[lo:hi]), clock=clock,
+                 batch=batch or 1, cadence=cadence or 1, t_start=t_start, spent0=stream.spent.snapshot(),
+                 start=start_step, middle=(start_step + scene.steps) // 2,
                  refiners={spec.name: Refiner(spec, make_engine, scene.base, h, scene.output_every, check)
                            for spec, _ in scene.sample_sets if spec.levels})
     if rank == 0:
