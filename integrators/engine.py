@@ -385,47 +385,46 @@ class Engine:
         :meth:`lanes_for` the state's points).  Any choice gives the same bits.  Returns the :class:`LaneUse` of the call
         (how many group steps the lanes took)."""
         from . import kernel
+        spec = self._specialise(state, lanes)
+        rounds = self._rounds(state, block)
+        arrays = state._tuple(self.nz)
+        if state.needs_factors:
+            self._refactor(state, arrays, spec.number == "double-double", spec.number == "complex step")
+        kernel.advance(spec.ev, spec.inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
+                       int(nsteps), int(block), arrays, (0,) * self.system.d, spec.newton, spec.proto,
+                       self._layout(), rounds)
+        return LaneUse(spec.lanes, *(int(x) for x in rounds.sum(axis=0)))
+
+    def _specialise(self, state, lanes=None):
+        """The :class:`Specialisation` a call on ``state`` takes: its number type (a double-double
+        state: (n, d, 2) values; complex step: complex values, always W = 1), the lane width (``lanes``,
+        or :meth:`lanes_for` the state's points; W = 1 where the system's functions have no lane
+        form), the point functions of that specialisation (compiled once per engine) and what the
+        kernel is handed for it (Newton's rule with TOL and STALL scaled to 2⁻¹⁰⁴ for double-double;
+        the prototype of a lane value: W zeros of the number type)."""
+        from . import kernel
         dd = state.q.ndim == 3
         W = self.lanes_for(state.q.shape[0], dd) if lanes is None else lanes
         if W not in (1, kernel.LANES, kernel.WIDE) or (dd and W == kernel.WIDE):
             widths = f"1 or {kernel.LANES}" if dd else f"1, {kernel.LANES} or {kernel.WIDE}"
             raise ValueError(f"lanes must be {widths}, got {lanes!r}")
-        if dd:                                      # a double-double state: the kernel's third specialisation
-            key = ("dd", W)
-            if key not in self._functions:
-                ev, inside = point_functions(self.system, lanes=W > 1, precision="double-double")
-                if ev is None:
-                    ev, inside = point_functions(self.system, precision="double-double")
-                    W = 1
-                self._functions[key] = ev, inside, W
-            ev, inside, W = self._functions[key]
-            rounds = self._rounds(state, block)
-            arrays = state._tuple(self.nz)
-            if state.needs_factors:
-                self._refactor(state, arrays, True, False)
-            kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
-                           int(nsteps), int(block), arrays, (0,) * self.system.d, self._cfg_dd,
-                           (0.0,) * W, self._layout(), rounds)
-            return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
-        cplx = bool(np.iscomplexobj(state.q))
-        if cplx:
-            W = 1
-        key = (cplx, W)
+        cplx = not dd and bool(np.iscomplexobj(state.q))
+        number = "double-double" if dd else "complex step" if cplx else "double"
+        W = 1 if cplx else W
+        key = ("dd", W) if dd else (cplx, W)
         if key not in self._functions:
-            ev, inside = point_functions(self.system, cplx, lanes=W if W > 1 else False)
+            if dd:
+                ev, inside = point_functions(self.system, lanes=W > 1, precision="double-double")
+            else:
+                ev, inside = point_functions(self.system, cplx, lanes=W if W > 1 else False)
             if ev is None:              # no lane form of one of the system's functions
-                ev, inside = point_functions(self.system, cplx)
+                ev, inside = point_functions(self.system, precision="double-double") if dd else \
+                    point_functions(self.system, cplx)
                 W = 1
             self._functions[key] = ev, inside, W
         ev, inside, W = self._functions[key]
-        rounds = self._rounds(state, block)
-        arrays = state._tuple(self.nz)
-        if state.needs_factors:
-            self._refactor(state, arrays, False, cplx)
-        kernel.advance(ev, inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first), int(nsteps),
-                       int(block), arrays, (0,) * self.system.d, self._cfg, (0,) * W, self._layout(),
-                       rounds)
-        return LaneUse(W, *(int(x) for x in rounds.sum(axis=0)))
+        return Specialisation(number, W, ev, inside, self._cfg_dd if dd else self._cfg,
+                              (0.0,) * W if dd else (0,) * W)
 
     def _refactor(self, state, arrays, double_double, cplx):
         """The Newton factors of a state that notes them but does not hold them (read from a
@@ -499,6 +498,20 @@ class MapEngine:
             state.have_history[ok] = True
             state.live[bad] = False
             state.breakdown_time[bad] = t0 + (first + j) * h
+
+
+class Specialisation(NamedTuple):
+    """What selects the compiled code of a kernel call, in one place (:meth:`Engine._specialise`):
+    ``number`` ("double", "complex step" or "double-double") and ``lanes`` (W), with that
+    specialisation's point functions ``ev``, ``inside`` and what the kernel is handed for it:
+    ``newton`` (Tolerances.array, scaled for double-double) and ``proto`` (W zeros of the number
+    type, which selects the kernel's lane type).  Any W gives a point the same bits."""
+    number: str
+    lanes: int
+    ev: object
+    inside: object
+    newton: np.ndarray
+    proto: tuple
 
 
 PREDICTORS = ("extrapolate", "velocity")

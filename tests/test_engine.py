@@ -263,3 +263,25 @@ def test_compile_kernels_names_the_children_that_failed():
     compile_kernel(2, 1)
     assert any(str(sig[13]) == "UniTuple(int64 x 1)" and str(sig[11]) == "UniTuple(int64 x 2)"
                and "complex" not in str(sig[10]) for sig in kernel.advance.signatures)
+
+
+def test_one_specialisation_names_what_a_call_compiles():
+    """Engine._specialise: a real state of 20 points takes double in 8 lanes, a complex one complex
+    step in 1, a double-double one 8 lanes with Newton's TOL and STALL scaled from eps to 2⁻¹⁰⁴ (the
+    rest of the rule as is) and a prototype of double zeros; 16 lanes for double-double are refused."""
+    import integrators
+    from integrators.engine import Engine, Specialisation
+    sy = integrators.system("lotka_volterra_2d")
+    e = Engine(sy, integrators.tableau("GLRK2"), "symmetric", 0.1)
+    q = np.array([[1.0, 1.0]]) + 0.01 * np.arange(20)[:, None]
+    real = e._specialise(e.state(q))
+    assert isinstance(real, Specialisation) and (real.number, real.lanes, real.proto) == ("double", 8, (0,) * 8)
+    cs = e._specialise(e.state(q.astype(complex), dtype=np.complex128))
+    assert (cs.number, cs.lanes) == ("complex step", 1)
+    dd = Engine(sy, integrators.tableau("GLRK2"), "symmetric", 0.1, precision="double-double")
+    spec = dd._specialise(dd.state(q))
+    assert (spec.number, spec.lanes, spec.proto) == ("double-double", 8, (0.0,) * 8)
+    scale = 2.0 ** -104 / np.finfo(float).eps
+    assert np.array_equal(spec.newton[:2], real.newton[:2] * scale) and np.array_equal(spec.newton[2:], real.newton[2:])
+    with pytest.raises(ValueError, match="lanes must be 1 or 8"):
+        dd._specialise(dd.state(q), lanes=16)
