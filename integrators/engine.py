@@ -266,11 +266,18 @@ class Tolerances:
         if isinstance(self.maxiter, bool) or not isinstance(self.maxiter, (int, np.integer)) or self.maxiter < 1:
             raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
 
-    def array(self) -> np.ndarray:
-        """[TOL, STALL, STALL_COMPLEX, MAXITER, REFRESH, ACCEPT, VELOCITY]: what the kernel reads."""
-        return np.array([self.tol, self.stall, self.stall_complex, float(self.maxiter), self.refresh,
-                         1.0 if self.accept_unconverged else 0.0, 1.0 if self.predictor == "velocity" else 0.0],
-                        dtype=np.float64)
+    def array(self, double_double=False) -> np.ndarray:
+        """The rule as the kernel reads it: one float64 array in the order of the kernel's
+        :data:`~integrators.kernel.Newton` record (its one owner), filled by name.  With
+        ``double_double``, tol and stall scaled from double's eps to 2⁻¹⁰⁴ (the same rule, one
+        number type down)."""
+        from .kernel import Newton
+        scale = 2.0 ** -104 / np.finfo(np.float64).eps if double_double else 1.0
+        values = dict(tol=self.tol * scale, stall=self.stall * scale, stall_complex=self.stall_complex,
+                      maxiter=float(self.maxiter), refresh=self.refresh,
+                      accept=1.0 if self.accept_unconverged else 0.0,
+                      velocity=1.0 if self.predictor == "velocity" else 0.0)
+        return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 
 def theta_dd(system, q2):
@@ -323,12 +330,7 @@ class Engine:
         if not isinstance(self.tolerances, Tolerances):
             raise ValueError(f"tolerances must be an integrators.engine.Tolerances, got {type(tolerances).__name__}")
         self.tab = kernel.flat_tableau(tableau, predictor(tableau.c, self.tolerances.predictor))
-        self._cfg = self.tolerances.array()
-        # double-double: the same rule with TOL and STALL scaled from double's eps to 2^-104
-        scale = 2.0 ** -104 / np.finfo(np.float64).eps
-        self._cfg_dd = self._cfg.copy()
-        self._cfg_dd[0] *= scale
-        self._cfg_dd[1] *= scale
+        self._cfg, self._cfg_dd = self.tolerances.array(), self.tolerances.array(double_double=True)
         self._functions = {}
 
     @property
