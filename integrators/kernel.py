@@ -1217,12 +1217,12 @@ def _probe(WS, zz, r, J, ev, k, tab, plan, h, q, p, lam, jac, s, S):
     _main(_at(zz, 0), jac, _at(r, 0), _at(J, 0), ev, _at(k, 0), h, _at(tab, 0), plan, d, s, w, S)
 
 
-def probe(ev, k, tab, plan, h, q, p, lam, z, jac):
-    """The step's residual at z (and its Jacobian when ``jac``) for one point (q, p, Λ): the equations
-    Newton solves, for tests (the Jacobian against complex-step differences of the residual)."""
+def probe(ev, k, tab, plan, h, q, p, lam, z, jac, *, s):
+    """The step's residual at z (and its Jacobian when ``jac``) for one point (q, p, Λ) of a pair with
+    ``s`` stages (``tab`` its :func:`flat_tableau`): the equations Newton solves, for tests (the
+    Jacobian against complex-step differences of the residual)."""
     d = q.shape[0]
     nz = z.shape[0]
-    s = next(c for c in range(1, 9) if 5 * c * c + 5 * c == tab.shape[0])   # the flat tableau: 5 s² + 5 s
     S, F, _ = layout(s, d, nz)
     WS = np.zeros(S.size, z.dtype)
     r = np.zeros(nz, z.dtype)

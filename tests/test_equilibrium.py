@@ -180,12 +180,12 @@ def test_the_jacobian_is_exact_in_the_spline_field(shipped, proj, rng):
     lam = 1e-6 * rng.standard_normal(4)
     z = 1e-5 * rng.standard_normal(eng.nz)
     z[:8] += np.tile(h * shipped.vector_field(q), 2)
-    _, J = kernel.probe(ev_r, eng.k, eng.tab, eng.plan, h, q, p, lam, z, True)
+    _, J = kernel.probe(ev_r, eng.k, eng.tab, eng.plan, h, q, p, lam, z, True, s=eng.tableau.s)
     for k in range(eng.nz):
         zc = z.astype(complex)
         zc[k] += 1e-30j
         col = kernel.probe(ev_c, eng.k, eng.tab, eng.plan, h, q.astype(complex), p.astype(complex),
-                           lam.astype(complex), zc, False)[0].imag / 1e-30
+                           lam.astype(complex), zc, False, s=eng.tableau.s)[0].imag / 1e-30
         assert np.max(np.abs(J[:, k] - col)) <= 1e-12 * max(1.0, np.max(np.abs(col))), k
 
 
