@@ -304,7 +304,7 @@ def compile_first(scene, system, n, ranks=1):
 @dataclasses.dataclass
 class _Opened:
     """The output as :func:`_open_output` leaves it: the file (rank 0's; None elsewhere), the pairs'
-    jobs in scene order (None: finished; else (start step, saved state or a marker)), the file being
+    jobs in scene order (None: finished; else a :class:`resumable.Job`), the file being
     replaced (--force, an extension) and the token naming this run's checkpoint slabs."""
     f: object
     todo: list
@@ -318,7 +318,7 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
     each rank gets its own rows of one when its pair begins) and the slab token."""
     from invariants import UNDER_RESOLVED
     rank, n = comm.rank, q0.shape[0]
-    f, todo, replacing = None, [], None
+    f, todo, replacing, error = None, [], None, None
     token = secrets.token_hex(4)       # names this run's checkpoint slabs (rank 0's, sent with the pairs to run)
     if rank == 0:
         with critical():
@@ -366,21 +366,22 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                     if replacing is None:          # slabs no slot links (a stopped run's, a deleted file's)
                         checkpoints.prune_slabs(f, path, token)
             except (OSError, ValueError) as exc:
-                todo = exc if isinstance(exc, (ValueError, files.OutputError)) else \
+                error = exc if isinstance(exc, (ValueError, files.OutputError)) else \
                     files.OutputError(f"cannot write output '{path}': {files.plain_error(exc)}")
+                todo = []
                 if f is not None:
                     close_quietly(f)
     # the pairs to run go to every rank without their saved states (a state is every point's:
     # 314 bytes a point and pair); each rank gets its own rows of one when its pair begins
-    sent = todo if rank != 0 or isinstance(todo, Exception) else \
-        [None if t is None else (t[0], None if t[1] is None else True) for t in todo]
-    sent, token = comm.bcast((sent, token) if rank == 0 else None, root=0)
+    sent = None if rank != 0 else \
+        (error, [None if t is None else t._replace(state=None if t.state is None else True) for t in todo])
+    (error, sent), token = comm.bcast((sent, token) if rank == 0 else None, root=0)
     if rank != 0:
         todo = sent
-    if isinstance(todo, Exception):
+    if error is not None:
         if replacing is not None:
             replacing.abandon()
-        raise todo
+        raise error
     return _Opened(f, todo, replacing, token)
 
 
@@ -393,7 +394,7 @@ def _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, 
     rank, f, replacing = comm.rank, opened.f, opened.replacing
     retry = "the same command (--resume)" if resume else "--force"   # after a failure before the file was replaced
     timings = {}
-    steps_total = sum(scene.steps - (t[0] if t else scene.steps) for t in opened.todo) or 1
+    steps_total = sum(scene.steps - (t.start if t else scene.steps) for t in opened.todo) or 1
     bar = Progress(steps_total, enabled=(rank == 0 and progress is not False and (progress or _interactive())))
     try:
         stream = _Stream(comm, scene, f, after_output, timings, UNDER_RESOLVED, checkpoints.state_dir(path), opened.token)
@@ -459,7 +460,7 @@ def _run_pair(comm, stream, scene, system, q0, pair_, job, first, has_next, bar,
     rank, size = comm.rank, comm.size
     n, h = q0.shape[0], scene.h
     name = pair_.name
-    start_step, saved = job
+    start_step, saved = job.start, job.state
     make_engine, s_tab = _engine_maker(scene, system, pair_)
     engine = make_engine()
     clock = pair_clock()

@@ -3,6 +3,7 @@ checkpoints, checked before a byte is changed; and reopening it where each pair 
 from __future__ import annotations
 
 import json
+from typing import NamedTuple
 
 import h5py
 import numpy as np
@@ -152,10 +153,17 @@ def reopen(path, scene):
     return f
 
 
+class Job(NamedTuple):
+    """What a pair has left to do: the step it starts at and the saved state it starts from (None:
+    from the scene's points; on ranks other than 0, ``True`` where rank 0 holds a saved state)."""
+    start: int
+    state: object
+
+
 def restart_pair(f, name, output_every, finished_too=False):
-    """Where a pair starts: None (finished, and ``finished_too`` is False), (0, None) (from the start,
-    rows cleared) or (step, state) of its checkpoint, with its row and the rows after it cleared
-    (the driver takes the checkpoint's row again from the state: the same bits)."""
+    """Where a pair starts: None (finished, and ``finished_too`` is False), Job(0, None) (from the
+    start, rows cleared) or Job(step, state) of its checkpoint, with its row and the rows after it
+    cleared (the driver takes the checkpoint's row again from the state: the same bits)."""
     g = f["runs"][name]
     step, state = read_checkpoint(g)
     if g.attrs["status"] in FINISHED and not finished_too:
@@ -164,7 +172,7 @@ def restart_pair(f, name, output_every, finished_too=False):
     if step is None or step % output_every:      # (a state off the cadence, from an older version: start again)
         truncate(g, 0)
         g["breakdown_time"][...] = np.inf
-        return 0, None
+        return Job(0, None)
     truncate(g, step // output_every)            # the checkpoint's own row is taken again from its state
     g["breakdown_time"][...] = state["breakdown_time"]   # as of the checkpoint: later rows are gone
-    return step, state
+    return Job(step, state)
