@@ -411,16 +411,19 @@ def scalar_function(system):
     return _load(system).scalars
 
 
-def point_functions(system, complex_step=False, lanes=False, precision="double"):
-    """The compiled (evaluate, inside) pair of ``system`` (generated and compiled once per machine):
-    the scalar real or complex-step evaluation, or with ``lanes`` the W-lane one (``True``: W =
-    kernel.LANES; an int: that W, LANES or kernel.WIDE; None where the system has a function without
-    a lane form); with ``precision="double-double"`` the scalar double-double one (its own module,
+def point_functions(system, complex_step=False, lanes=1, precision="double"):
+    """The compiled (evaluate, inside) pair of ``system`` (generated and compiled once per machine)
+    for ``lanes`` = W: 1, the scalar real or complex-step evaluation; kernel.LANES or kernel.WIDE,
+    the W-lane one (real only; None where the system has a function without a lane form).  With
+    ``precision="double-double"`` the scalar double-double one (its own module,
     :func:`generate_dd_source`), or its LANES-lane one."""
-    from .kernel import WIDE
+    from .kernel import LANES, WIDE
+    if isinstance(lanes, bool) or lanes not in ((1, LANES) if precision == "double-double" else (1, LANES, WIDE)):
+        raise ValueError(f"lanes must be a lane width W (1, {LANES}{'' if precision == 'double-double' else f' or {WIDE}'}), "
+                         f"got {lanes!r}")
     if precision == "double-double":
         mod = _load(system, "double-double")
-        if not lanes:
+        if lanes == 1:
             return mod.evaluate_dd, _load(system).inside
         if not hasattr(mod, "_lanes_dd"):
             try:
@@ -429,14 +432,14 @@ def point_functions(system, complex_step=False, lanes=False, precision="double")
                 mod._lanes_dd = None
         return mod._lanes_dd, _load(system).inside
     mod = _load(system)
-    if lanes == WIDE:                # (True, the LANES-lane function, is 1, never WIDE)
+    if lanes == WIDE:
         if not hasattr(mod, "_lanes_wide"):
             try:
                 mod._lanes_wide = mod.lanes_wide()
             except Exception:       # a function without a lane form: the engine runs W = 1
                 mod._lanes_wide = None
         return mod._lanes_wide, mod.inside
-    ev = mod.evaluate_lanes if lanes else (mod.evaluate_complex if complex_step else mod.evaluate_real)
+    ev = mod.evaluate_lanes if lanes == LANES else (mod.evaluate_complex if complex_step else mod.evaluate_real)
     return ev, mod.inside
 
 

@@ -416,9 +416,9 @@ class Engine:
         key = ("dd", W) if dd else (cplx, W)
         if key not in self._functions:
             if dd:
-                ev, inside = point_functions(self.system, lanes=W > 1, precision="double-double")
+                ev, inside = point_functions(self.system, lanes=W, precision="double-double")
             else:
-                ev, inside = point_functions(self.system, cplx, lanes=W if W > 1 else False)
+                ev, inside = point_functions(self.system, cplx, lanes=W)
             if ev is None:              # no lane form of one of the system's functions
                 ev, inside = point_functions(self.system, precision="double-double") if dd else \
                     point_functions(self.system, cplx)

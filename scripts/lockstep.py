@@ -82,7 +82,7 @@ def evaluations(system, q, reps=200000):
     """ns per iteration's worth of evaluations: s scalar calls, or one 8-lane call."""
     d = system.d
     ev1, _ = point_functions(system, False)
-    ev8, _ = point_functions(system, False, lanes=True)
+    ev8, _ = point_functions(system, False, lanes=8)
     k = np.array([float(v) for v in system.params.values()])
     q8 = np.ascontiguousarray(q[:8])
     packed = np.ascontiguousarray(q8.T).ravel()

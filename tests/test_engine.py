@@ -285,3 +285,17 @@ def test_one_specialisation_names_what_a_call_compiles():
     assert np.array_equal(spec.newton[:2], real.newton[:2] * scale) and np.array_equal(spec.newton[2:], real.newton[2:])
     with pytest.raises(ValueError, match="lanes must be 1 or 8"):
         dd._specialise(dd.state(q), lanes=16)
+
+
+def test_point_functions_take_a_lane_width():
+    """codegen.point_functions(lanes=W): 1 the scalar function, 8 and 16 the lane ones (one per W, the
+    same object on a second call); double-double takes 1 or 8; a bool or another W is refused."""
+    import integrators
+    from integrators.codegen import point_functions
+    sy = integrators.system("lotka_volterra_2d")
+    scalar, lanes8 = point_functions(sy)[0], point_functions(sy, lanes=8)[0]
+    assert scalar is not lanes8 and point_functions(sy, lanes=8)[0] is lanes8
+    assert point_functions(sy, lanes=16)[0] not in (scalar, lanes8)
+    for bad, kw in ((True, {}), (4, {}), (16, {"precision": "double-double"})):
+        with pytest.raises(ValueError, match="lanes must be a lane width W"):
+            point_functions(sy, lanes=bad, **kw)
