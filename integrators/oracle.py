@@ -57,6 +57,21 @@ class Oracle:
         M = mpmath.matrix([[T[j][i] - T[i][j] for j in range(d)] for i in range(d)])
         return list(mpmath.lu_solve(M, mpmath.matrix(dH)))
 
+    def _project(self, qh, ph, lam):
+        """The consecutive projection after Ψ_h: Λ solving ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ from the
+        guess ``lam``; (q₁, p₁, Λ)."""
+        d, sig = self.d, self.sigma
+
+        def post(*Lz):
+            x = [qh[m] + sig * Lz[m] for m in range(d)]
+            tl, th1 = self.tapply(self.T(x), list(Lz)), self.th(x)
+            return [ph[m] + sig * tl[m] - th1[m] for m in range(d)]
+        L = mpmath.findroot(post, list(lam), tol=mpmath.mpf(10) ** (-2 * self.dps + 10), maxsteps=100)
+        L = [L[m] for m in range(d)]
+        x = [qh[m] + sig * L[m] for m in range(d)]
+        tl = self.tapply(self.T(x), L)
+        return x, [ph[m] + sig * tl[m] for m in range(d)], L
+
     def step(self, q, p, lam):
         """(q₁, p₁, Λ₁) from (q, p, Λ = hλ of the last step), mpmath lists of d numbers."""
         s, d, h, sig, rec = self.s, self.d, self.h, self.sigma, self.rec
@@ -132,17 +147,6 @@ class Oracle:
             Tpost = self.T(q1) if rec.post_at == "end" else Tp
             tl = self.tapply(Tpost, L)
             return q1, [pb[m] + sG[m] + sig * tl[m] for m in range(d)], L
-        if rec.post:                       # Ψ_h, then the projection: ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ
-            qh = [qbar[m] + sY[m] for m in range(d)]
-            ph = [pbar[m] + sG[m] for m in range(d)]
-
-            def post(*Lz):
-                x = [qh[m] + sig * Lz[m] for m in range(d)]
-                tl, th1 = self.tapply(self.T(x), list(Lz)), self.th(x)
-                return [ph[m] + sig * tl[m] - th1[m] for m in range(d)]
-            L = mpmath.findroot(post, list(lam), tol=mpmath.mpf(10) ** (-2 * self.dps + 10), maxsteps=100)
-            L = [L[m] for m in range(d)]
-            x = [qh[m] + sig * L[m] for m in range(d)]
-            tl = self.tapply(self.T(x), L)
-            return x, [ph[m] + sig * tl[m] for m in range(d)], L
+        if rec.post:                       # Ψ_h, then the projection
+            return self._project([qbar[m] + sY[m] for m in range(d)], [pbar[m] + sG[m] for m in range(d)], lam)
         return [q[m] + sY[m] for m in range(d)], [p[m] + sG[m] for m in range(d)], [mpmath.mpf(0)] * d

@@ -74,7 +74,7 @@ def scaling():
         step, info = examples.pendulum_array(k, method="strang")
         rng = np.random.default_rng(1)
         z0 = np.concatenate([rng.uniform(0, 2 * np.pi, k), 0.5 * rng.standard_normal(k)])
-        z = _loop(z0, _plane(k, None, None), 0.1, 256)
+        z = _loop(z0, _plane(2 * k, None, None), 0.1, 256)
         t_map = t_inv = 0.0
         for _ in range(20):
             t = time.perf_counter()
