@@ -243,7 +243,7 @@ class Tolerances:
         more node (one evaluation and a d × d solve a step; :func:`predictor`)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
-        non-finite value or outside the domain; scripts/breakdown_sensitivity.py --stopping-rule)
+        non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
 
     The defaults are the engine's since it was written: the same bits as before they were data.
     """
@@ -320,10 +320,11 @@ class Engine:
         self.system, self.tableau, self.h = system, tableau, float(h)
         self.projection = projection
         from . import kernel
-        rec = projection_record(projection)
+        self.record = rec = projection_record(projection)
         s, d = tableau.s, system.d
         lob = tableau.d is not None
         self.plan = kernel.Plan(*rec.codes(tableau), lob)
+        self.post = kernel.PAPER if rec.post_term is None else rec.post_term
         self.nz = (s + (1 if rec.coupled else 0) + (1 if lob else 0)) * d
         self.k = system.param_vector()
         self.tolerances = tolerances if tolerances is not None else Tolerances()
@@ -392,7 +393,7 @@ class Engine:
         arrays = state._tuple(self.nz)
         if state.needs_factors:
             self._refactor(state, arrays, spec.number == "double-double", spec.number == "complex step")
-        kernel.advance(spec.ev, spec.inside, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
+        kernel.advance(spec.ev, spec.inside, self.post, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
                        int(nsteps), int(block), arrays, (0,) * self.system.d, spec.newton, spec.proto,
                        self._layout(), rounds)
         return LaneUse(spec.lanes, *(int(x) for x in rounds.sum(axis=0)))

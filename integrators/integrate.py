@@ -111,7 +111,9 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", *, h=None, st
         solution keeps the leading shape, so a surface (nσ, nτ, d) comes back as (nsave, nσ, nτ, d)
         and ``invariants.along(solution, ...)`` gives its I₂ at every saved time
     tableau : Tableau or built-in name
-    projection : 'none' | 'standard' | 'symmetric' | 'symplectic' | 'midpoint'
+    projection : 'none' | 'standard' | 'symmetric' | 'symplectic' | 'midpoint', or a
+        :class:`integrators.projections.Projection` record of one's own (docs/engine.md, "Adding a
+        projection")
     h : time step (default: the system's paper value); may be negative
     steps : number of steps; save_every : output cadence in steps
     p0 : (npoints, d) initial momenta (default ϑ(q0); only 'none' can start off the constraint)
@@ -167,4 +169,4 @@ def integrate(system, q0, tableau="GLRK2", projection="symmetric", *, h=None, st
     return Solution(t=out_t, q=out_q.reshape(full), p=out_p.reshape(full), lam=out_l.reshape(full),
                     breakdown_time=state.breakdown_time.reshape(lead).copy(),
                     newton_iterations=state.iterations.reshape(lead).copy(), steps_taken=state.steps.reshape(lead).copy(),
-                    tableau=tab.name, projection=projection, h=h, precision=precision, **lo)
+                    tableau=tab.name, projection=engine.record.name, h=h, precision=precision, **lo)

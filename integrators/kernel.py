@@ -43,7 +43,7 @@ from .ddouble import DDType, dd
 
 # where ϑ and its derivatives are evaluated (the point slots of the scratch and a projection's
 # `at`), and the perturbation before Ψ_h: codes owned by integrators.projections
-from .projections import END, MIDPOINT, PRE_NONE, PRE_PREVIOUS, PRE_UNKNOWN, START
+from .projections import END, MIDPOINT, PRE_NONE, PRE_PREVIOUS, PRE_UNKNOWN, START  # noqa: F401 (PRE_NONE: the codes by name)
 from .simd import DDVec, LanePtr, _at, anyl, at, elem, elem3, is_complex, ld, ldi, lget, lanes, lmask, lset, mand, \
     mnot, mor, nlanes, plain, put, put3, raw, re, sel, st, sti, step_measure
 
@@ -207,6 +207,20 @@ a plain tuple in this order, the boolean flags viewed as uint8; value arrays wit
 in double-double)."""
 
 MODE_MAIN, MODE_POST = 0, 1     # what _newton solves: the step's equations, or the consecutive projection
+
+Step = namedtuple("Step", "post k h tb plan cfg")
+Step.__doc__ = """What a step of a pair reads besides the point functions, by name (made once per block in
+:func:`_block`): the projection's ``post`` term (PAPER, or a projection's own compiled function:
+:func:`post_term`), the parameters ``k``, the step size ``h``, the flat tableau ``tb``, the
+:class:`Plan` and Newton's rule ``cfg`` (a :class:`Newton` record).  The point functions ``ev`` and
+``inside`` travel beside it: inside a tuple numba would make them first-class function values,
+called through a pointer it cannot see through (measured: 20-25 % of a step's time)."""
+
+Group = namedtuple("Group", "w S f F ip IP qr")
+Group.__doc__ = """The scratch of one group of W lanes, by name (made once per block in :func:`_block`): the
+value buffer ``w`` and its :class:`Scratch` offsets ``S``, the real bookkeeping ``f`` and its :class:`Flags`
+``F``, the integers ``ip`` and their :class:`IntScratch` ``IP``, and ``qr`` (d doubles: one lane's
+q_{n+1} for the domain test)."""
 
 
 N_SCRATCH, N_FLAGS, N_INT = len(Scratch._fields), len(Flags._fields), len(IntScratch._fields)
@@ -586,9 +600,16 @@ def _main(z, jac, r, J, ev, k, h, tb, plan, d, s, w, S):
 
 
 @njit(inline='always', **_OPTS)
-def _post(z, jac, r, J, ev, k, sig, d, w, S):
-    """The consecutive projection: solve ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ for Λ
-    (eq:orthogonal_projection, eq:symplectic_projection_post) with q̂, p̂ the step's q̄ + ΣbY, p̄ + ΣbG."""
+def project(z, jac, r, J, ev, k, sig, d, w, S):
+    """The post term of the consecutive projections (standard, symplectic): ϑ(q̂ + σΛ) = p̂ + σ
+    ϑ_q(q̂ + σΛ)ᵀΛ, to be solved for Λ (eq:orthogonal_projection, eq:symplectic_projection_post).
+
+    The contract of every post term (a projection's ``post_term``; :func:`_newton` calls it in
+    MODE_POST, d unknowns): from the core's unprojected end point q̂, p̂ (``S.qh``, ``S.ph``, the
+    step's q̄ + ΣbY, p̄ + ΣbG) and the iterate Λ = ``z``, write p_{n+1} into ``S.p1``, the d
+    residuals into ``r`` and, when ``jac``, their Jacobian ∂r/∂Λ row-major into ``J``.  The kernel
+    then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1}; ``ev(x, k, jac, …)`` at a
+    point slot (:func:`_eval`) gives ϑ and its derivatives."""
     dd = d * d
     qh, ph, q1, p1, tl = at(w, S.qh), at(w, S.ph), at(w, S.q1), at(w, S.p1), at(w, S.tl)
     th1, T1, TT1 = at(w, S.pth + END * d), at(w, S.pT + END * dd), at(w, S.pTT + END * dd * d)
@@ -605,6 +626,22 @@ def _post(z, jac, r, J, ev, k, sig, d, w, S):
         for m in range(d):
             for n in range(d):
                 st(J, m * d + n, sig * (ld(T1, n * d + m) - ld(T1, m * d + n)) + (sig * sig) * ld(S1, m * d + n))
+
+
+PAPER = 0      # ``post`` of the paper's projections: :func:`project`, compiled in (a function argument
+#                would key the kernel on a Python object, which numba's cache cannot find again)
+
+
+def post_term(post, z, jac, r, J, ev, k, sig, d, w, S):
+    """The post term ``post`` (PAPER: :func:`project`; else a projection's own compiled function,
+    called with the same arguments), chosen when the kernel is compiled."""
+
+
+@overload(post_term, inline="always")
+def _post_term(post, z, jac, r, J, ev, k, sig, d, w, S):
+    if isinstance(post, types.Integer):
+        return lambda post, z, jac, r, J, ev, k, sig, d, w, S: project(z, jac, r, J, ev, k, sig, d, w, S)
+    return lambda post, z, jac, r, J, ev, k, sig, d, w, S: post(z, jac, r, J, ev, k, sig, d, w, S)
 
 
 @njit(inline='always', **_OPTS)
@@ -670,22 +707,23 @@ def _judge(f, F, tol, stall, refresh):
 
 
 @njit(**_OPTS)
-def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP, cfg):
+def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
     """Newton's method with the exact Jacobian, kept while it contracts, for every active lane.
 
     ``mode`` MODE_MAIN solves the step's equations (:func:`_main`), MODE_POST the consecutive projection
-    (:func:`_post`).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
+    (its post term ``P.post``: :func:`project` for the paper's).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
     ``known``: LU and piv hold its last step's factors) and again after an iteration that shrank
     its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ TOL, or ≤ STALL once
     the update stops halving; for complex z the imaginary part, read as a derivative, must pass the
     same test.  A lane that is done is held at its solution ``zev`` (the last iterate at which its
     residual was evaluated; every buffer the equations fill holds that evaluation) while the others
     go on.  Lanes to solve: ``f.active``; the outcome per lane in ``f.ok`` and ``f.its``.  The
-    tolerances are runtime data, ``cfg`` a :class:`Newton` record (:class:`integrators.engine.Tolerances`);
+    tolerances are runtime data, ``P.cfg`` a :class:`Newton` record (:class:`integrators.engine.Tolerances`);
     with ``cfg.accept`` a finite iterate that has not converged after ``cfg.maxiter`` iterations is
     taken (GeometricIntegrators.jl's stopping rule).
     """
     W = nlanes(z)           # (mode and nz arrive as runtime ints: a literal would compile this twice)
+    w, S, f, F, ip, IP, cfg = g.w, g.S, g.f, g.F, g.ip, g.IP, P.cfg
     tol, refresh = cfg.tol, cfg.refresh
     active = ld(f, F.active) != 0.0
     st(f, F.done, sel(active, 0.0, 1.0))
@@ -708,9 +746,9 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, k, h, tb, plan, d, s, w, S,
         jac = anyl(stale)
         Jx, pivx = (LU, piv) if W == 1 else (Jt, pivt)   # one lane: factorise in place
         if mode == MODE_MAIN:
-            _main(z, jac, r, Jx, ev, k, h, tb, plan, d, s, w, S)
+            _main(z, jac, r, Jx, ev, P.k, P.h, P.tb, P.plan, d, s, w, S)
         else:
-            _post(z, jac, r, Jx, ev, k, plan.sigma, d, w, S)
+            post_term(P.post, z, jac, r, Jx, ev, P.k, P.plan.sigma, d, g.w, g.S)
         if jac:
             lu_factor(Jx, pivx, nz)
             if W > 1:                             # every lane factorised, the lanes that asked keep theirs
@@ -736,10 +774,11 @@ def _none(f, F):
 
 
 @njit(**_OPTS)
-def _velocity(ev, k, q, h, v, where, d, w, S, ip, IP):
+def _velocity(ev, P, q, v, where, d, g):
     """h·q̇(q) into v (lanes ``where``), q̇ solving Ω̄ q̇ = ∇H (eq:euler_lagrange_equations); zero
     where that is not finite."""
-    _eval(ev, k, q, False, w, S, START, d)
+    w, S, ip, IP, h = g.w, g.S, g.ip, g.IP, P.h
+    _eval(ev, P.k, q, False, w, S, START, d)
     T, dH, PL = at(w, S.pT), at(w, S.pdH), at(w, S.PL)
     for i in range(d):
         for j in range(d):
@@ -756,10 +795,10 @@ def _velocity(ev, k, q, h, v, where, d, w, S, ip, IP):
 
 
 @njit(**_OPTS)
-def _first_guess(ev, k, q, h, Y, where, d, s, w, S, ip, IP):
+def _first_guess(ev, P, q, Y, where, d, s, g):
     """Stage displacements h·q̇(q_n) at every stage (lanes ``where``)."""
-    v = at(w, S.vf)
-    _velocity(ev, k, q, h, v, where, d, w, S, ip, IP)
+    v = at(g.w, g.S.vf)
+    _velocity(ev, P, q, v, where, d, g)
     for i in range(s):
         for m in range(d):
             st(Y, i * d + m, sel(where, ld(v, m), ld(Y, i * d + m)))
@@ -793,10 +832,11 @@ def _scale(x):
 
 
 @njit(**_OPTS)
-def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
+def _attempt(known, guess, mu0, ev, inside, P, d, s, nz, g):
     """One step of the lanes ``f.active`` from the stage guess (and μ guess), starting from the kept
     Newton factors in the lanes ``known``; commits the new state of each lane that succeeds.  Per
     lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
+    w, S, f, F, ip, IP, plan = g.w, g.S, g.f, g.F, g.ip, g.IP, P.plan
     sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
     iL = sd
@@ -804,7 +844,7 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
     q, lam = at(w, S.q), at(w, S.lam)
     qbar, pbar, sY, sG, p1 = at(w, S.qbar), at(w, S.pbar), at(w, S.sY), at(w, S.sG), at(w, S.p1)
     z, zev, r = at(w, S.z), at(w, S.zev), at(w, S.r)
-    _prepare(ev, k, plan, d, w, S)
+    _prepare(ev, P.k, plan, d, w, S)
     for i in range(sd):
         st(z, i, ld(guess, i))
     for m in range(d):
@@ -816,8 +856,7 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
         if plan.lobatto:
             st(z, iM + m, ld(mu0, m))
             st(f, F.scale + iM + m, _scale(ld(pbar, m)))
-    _newton(_runtime(MODE_MAIN, nz), z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, k, h, tb, plan, d, s, w, S, f, F, ip, IP,
-            cfg)
+    _newton(_runtime(MODE_MAIN, nz), z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, P, d, s, g)
     ok = ld(f, F.ok) != 0.0
     its = ld(f, F.its)
     inc, pn, ln = at(w, S.inc), at(w, S.pn), at(w, S.ln)
@@ -836,8 +875,8 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
             st(ph, m, ld(pbar, m) + ld(sG, m))
             st(pz, m, ld(lam, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
-        _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, k, h, tb,
-                plan, d, s, w, S, f, F, ip, IP, cfg)
+        _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, P,
+                d, s, g)
         ok = mand(ok, ld(f, F.ok) != 0.0)
         its = its + ld(f, F.its)
         for m in range(d):
@@ -855,7 +894,7 @@ def _attempt(known, guess, mu0, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F
     for m in range(d):
         ok = mand(ok, mand(np.isfinite(ld(pn, m)), np.isfinite(ld(ln, m))))
     st(f, F.okstep, sel(mand(active, ok), 1.0, 0.0))
-    _commit(inside, k, plan, d, s, iM, w, S, f, F, qr)
+    _commit(inside, P, d, s, iM, g)
 
 
 @njit(inline='always', **_OPTS)
@@ -879,16 +918,17 @@ def _sum_increments(plan, d, w, S):
 
 
 @njit(inline='always', **_OPTS)
-def _commit(inside, k, plan, d, s, iM, w, S, f, F, qr):
+def _commit(inside, P, d, s, iM, g):
     """The lanes whose step succeeded (``f.okstep``) and whose q_{n+1} lies in the domain take the new
     state (q, p, Λ, compensation terms, the stages and μ for the next guess); the others keep theirs."""
+    w, S, f, F, qr = g.w, g.S, g.f, g.F, g.qr
     q, p, lam, qc, pc = at(w, S.q), at(w, S.p), at(w, S.lam), at(w, S.qc), at(w, S.pc)
     qn, qcn, pn, pcn, ln, zev = at(w, S.qn), at(w, S.qcn), at(w, S.pn), at(w, S.pcn), at(w, S.ln), at(w, S.zev)
     for l in range(nlanes(w)):
         if lget(f, F.okstep, l) != 0.0:
             for m in range(d):
                 qr[m] = re(lget(qn, m, l))
-            if not inside(qr, k):
+            if not inside(qr, P.k):
                 lset(f, F.okstep, l, 0.0)
     commit = ld(f, F.okstep) != 0.0
     if anyl(commit):
@@ -899,14 +939,14 @@ def _commit(inside, k, plan, d, s, iM, w, S, f, F, qr):
             st(p, m, sel(commit, ld(pn, m), ld(p, m)))
             st(pc, m, sel(commit, ld(pcn, m), ld(pc, m)))
             st(lam, m, sel(commit, ld(ln, m), ld(lam, m)))
-            if plan.lobatto:
+            if P.plan.lobatto:
                 st(mus, m, sel(commit, ld(zev, iM + m), ld(mus, m)))
         for i in range(s * d):
             st(Ys, i, sel(commit, ld(zev, i), ld(Ys, i)))
 
 
 @njit(**_OPTS)
-def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg):
+def _step(t_next, ev, inside, P, d, s, nz, g):
     """Advance the live lanes by one step; returns the lanes whose step is over (taken, or broken down).
 
     A step is tried from up to three starts before a lane breaks down: (0) the extrapolated stage
@@ -918,15 +958,16 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
     function (``F.retry``: the next try's number, its step not over), made beside its neighbours'
     next steps instead of in a pass of its own in which they would wait; it computes what a pass of
     its own would."""
+    w, S, f, F, cfg = g.w, g.S, g.f, g.F, P.cfg
     live = ld(f, F.live) != 0.0
     fresh = ld(f, F.hist) == 0.0
     tries = ld(f, F.retry)
     last = tries == 2.0
-    c = _coefficients(tb, s)
+    c = _coefficients(P.tb, s)
     Ys, guess, v = at(w, S.Y), at(w, S.guess), at(w, S.vf)
     velocity = cfg.velocity != 0.0              # the predictor: with h·q̇(q_n) as a node at 0
     if velocity:
-        _velocity(ev, k, at(w, S.q), h, v, mnot(fresh), d, w, S, ip, IP)
+        _velocity(ev, P, at(w, S.q), v, mnot(fresh), d, g)
     for i in range(s):                          # Lagrange extrapolation of the last step's stages
         for m in range(d):
             acc = c.E[i * (s + 1)] * ld(Ys, m)
@@ -937,13 +978,13 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
             st(guess, i * d + m, acc)
     first = mand(live, mor(fresh, last))        # a first step, or the last try: from h·q̇(q_n)
     if anyl(first):
-        _first_guess(ev, k, at(w, S.q), h, guess, first, d, s, w, S, ip, IP)
+        _first_guess(ev, P, at(w, S.q), guess, first, d, s, g)
     mu, mug = at(w, S.mu), at(w, S.mug)
     for m in range(d):                          # μ's guess: the last step's, zero on the last try
         st(mug, m, sel(last, 0.0, ld(mu, m)))
     st(f, F.active, sel(live, 1.0, 0.0))
     known = mand(ld(f, F.have) != 0.0, tries == 0.0)   # carried factors: try 0 only
-    _attempt(known, guess, mug, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, cfg)
+    _attempt(known, guess, mug, ev, inside, P, d, s, nz, g)
     ok = ld(f, F.okstep) != 0.0
     nxt = sel(known, 1.0, sel(mor(fresh, last), 3.0, 2.0))   # the try after a failed one (3: none left)
     retry = mand(live, mand(mnot(ok), nxt < 3.0))
@@ -959,10 +1000,11 @@ def _step(t_next, ev, inside, k, h, tb, plan, d, s, nz, w, S, f, F, ip, IP, qr, 
 
 
 @njit(**_OPTS)
-def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
+def _gather(st_, pt, l, valid, d, s, nz, g):
     """The state of point ``pt`` into lane ``l``; ``valid`` False leaves the lane empty (it holds
     the point's values, so that its arithmetic stays on ordinary numbers, but it is not live and
     has no factors)."""
+    w, S, f, F, ip, IP = g.w, g.S, g.f, g.F, g.ip, g.IP
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
     hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
     jz, jq, jl = st_.jac_z, st_.jac_q, st_.jac_lam
@@ -1000,8 +1042,9 @@ def _gather(st_, pt, l, valid, d, s, nz, w, S, f, F, ip, IP):
 
 
 @njit(**_OPTS)
-def _scatter(st_, pt, l, d, s, nz, w, S, f, F, ip, IP):
+def _scatter(st_, pt, l, d, s, nz, g):
     """Lane ``l``'s state back into point ``pt``."""
+    w, S, f, F, ip, IP = g.w, g.S, g.f, g.F, g.ip, g.IP
     q, p, Lam, qc, pc, Y, mu = st_.q, st_.p, st_.Lam, st_.q_comp, st_.p_comp, st_.Y, st_.mu
     hist, live, tbrk, lu, piv, have = st_.have_history, st_.live, st_.breakdown_time, st_.lu, st_.piv, st_.have_lu
     itn, stp = st_.iterations, st_.steps
@@ -1042,8 +1085,8 @@ def _next_live(live, order, nxt, hi):
 
 
 @njit(**_OPTS)
-def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto,
-           lay):
+def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg,
+           proto, lay):
     """The live points among order[lo … hi − 1] through ``nsteps`` steps each, W (= len(proto))
     lanes at a time, with the thread's scratch arrays; returns the group steps taken and the Newton
     iterations they ran.
@@ -1062,11 +1105,13 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first
     call, while numba would free a local array after its last use as an array, i.e. while the raw
     pointers taken from it are still in use.
     """
-    # the records by name (made here: numba's parallel loop takes no named tuples)
+    # the records by name, made here (numba's parallel loop takes no named tuples)
     S, F, IP = _records(lay)
-    plan, st_, cfg = Plan(*plan), StateArrays(*st_), _newton_rule(cfg)
+    st_ = StateArrays(*st_)
+    P = Step(post, kp, h, tb, Plan(*plan), _newton_rule(cfg))
     W = len(proto)
-    w, f, ip, qr = lanes(WS, 0, proto), lanes(FS, 0, plain(proto)), lanes(IS, 0, plain(proto)), _at(QR, 0)
+    g = Group(lanes(WS, 0, proto), S, lanes(FS, 0, plain(proto)), F, lanes(IS, 0, plain(proto)), IP, _at(QR, 0))
+    f, ip = g.f, g.ip
     live = st_.live
     nxt = _next_live(live, order, lo, hi)
     if nxt == hi or nsteps <= 0:
@@ -1075,26 +1120,25 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first
     held = 0
     for l in range(W):
         if nxt < hi:
-            _gather(st_, order[nxt], l, True, d, s, nz, w, S, f, F, ip, IP)
+            _gather(st_, order[nxt], l, True, d, s, nz, g)
             nxt = _next_live(live, order, nxt + 1, hi)
             held += 1
         else:
-            _gather(st_, pad, l, False, d, s, nz, w, S, f, F, ip, IP)
+            _gather(st_, pad, l, False, d, s, nz, g)
     rounds = 0
     last = float(nsteps)
     while held > 0:
         rounds += 1
-        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, kp, h, tb, plan, d, s, nz, w, S, f, F, ip, IP,
-                     qr, cfg)
+        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, P, d, s, nz, g)
         jn = ld(f, F.jn) + sel(over, 1.0, 0.0)
         st(f, F.jn, jn)
         ends = mand(ld(f, F.held) != 0.0, mor(ld(f, F.live) == 0.0, jn >= last))
         if anyl(ends):                            # lanes whose point is done: hand it back, take the next
             for l in range(W):
                 if lmask(ends, l):
-                    _scatter(st_, lget(ip, IP.pt, l), l, d, s, nz, w, S, f, F, ip, IP)
+                    _scatter(st_, lget(ip, IP.pt, l), l, d, s, nz, g)
                     if nxt < hi:
-                        _gather(st_, order[nxt], l, True, d, s, nz, w, S, f, F, ip, IP)
+                        _gather(st_, order[nxt], l, True, d, s, nz, g)
                         nxt = _next_live(live, order, nxt + 1, hi)
                     else:
                         lset(f, F.held, l, 0.0)
@@ -1104,13 +1148,15 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, kp, h, tb, plan, t0, first
 
 
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds):
+def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds):
     """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
     ``first`` aiming at t0 + first·h.  The live points, in their order, are taken ``block`` at a
     time (dead points are left out before blocks are made, so every block but the last is full),
     blocks spread over the threads, and W = len(proto) at a time within a block (``ev`` must be the
     W-lane point function); a point's steps never depend on its block, its lanes, its thread or its
-    neighbours.
+    neighbours.  ``post``: the projection's post term, PAPER for :func:`project` (read only by
+    projections solved after Ψ_h); a projection's own compiled function compiles (and does not
+    cache) a kernel of its own.
 
     ``st_``: the :class:`StateArrays` as a plain tuple; ``tolerances``: the float64 array of a
     :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``lay``: :func:`layout` as
@@ -1144,7 +1190,14 @@ def advance(ev, inside, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tol
         IS = np.zeros(ni, np.int64)
         QR = np.zeros(d)
         rounds[bi, 0], rounds[bi, 1] = _block(WS, FS, IS, QR, order, bi * block, min(m, (bi + 1) * block), ev, inside,
-                                              kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto, lay)
+                                              post, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto, lay)
+
+
+def advance_argument(sig, name):
+    """The numba type of :func:`advance`'s argument ``name`` in its compiled signature ``sig`` (one of
+    ``advance.signatures``): which specialisations exist, read by name."""
+    import inspect
+    return sig[list(inspect.signature(advance.py_func).parameters).index(name)]
 
 
 @njit(**_OPTS)

@@ -51,6 +51,10 @@ class Projection:
     post_at : where ϑ_q of the projection is taken: 'end' (q_{n+1}) or 'midpoint'
     sign : the projection's factor σ: 'one' or 'R_inf' (the tableau's R(∞), which must be ±1)
     labels : the paper's equations it implements
+    post_term : for a projection solved after Ψ_h (``post`` and not coupled), the compiled function
+          whose root in Λ ends the step; None: the paper's, :func:`integrators.kernel.project`
+          (ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ).  Its contract is in that function's docstring;
+          docs/engine.md, "Adding a projection", shows one
     """
 
     name: str
@@ -60,6 +64,7 @@ class Projection:
     post_at: str
     sign: str
     labels: tuple
+    post_term: object = None
 
     @property
     def coupled(self) -> bool:
@@ -88,8 +93,12 @@ RECORDS = {r.name: r for r in (
 
 
 def projection_record(name) -> Projection:
+    """The record of the projection ``name`` (a name in RECORDS), or ``name`` itself if it is a
+    :class:`Projection`."""
+    if isinstance(name, Projection):
+        return name
     if name not in RECORDS:
-        raise ValueError(f"unknown projection '{name}'; choose one of {', '.join(PROJECTIONS)}")
+        raise ValueError(f"unknown projection '{name}'; choose one of {', '.join(RECORDS)}")
     return RECORDS[name]
 
 
@@ -99,9 +108,12 @@ def admission(tableau, projection):
     The one place of this rule (the engine, scenes and the audit all ask here): the projections
     whose sign is σ = R(∞) need |R(∞)| = 1 (the table in sec:projection).
     """
-    if projection not in PROJECTIONS:
-        return f"unknown projection '{projection}'; choose one of {', '.join(PROJECTIONS)}"
-    if RECORDS[projection].sign == "R_inf" and abs(tableau.R_inf) != 1.0:
-        return (f"projection '{projection}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = {tableau.R_inf:.17g}; "
+    if not isinstance(projection, Projection) and projection not in RECORDS:
+        return f"unknown projection '{projection}'; choose one of {', '.join(RECORDS)}"
+    rec = projection_record(projection)
+    if rec.post_term is not None and (not rec.post or rec.coupled):
+        return f"projection '{rec.name}' has a post term but is not solved after Ψ_h (post, not coupled)"
+    if rec.sign == "R_inf" and abs(tableau.R_inf) != 1.0:
+        return (f"projection '{rec.name}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = {tableau.R_inf:.17g}; "
                 "use 'none' or 'standard'")
     return None

@@ -36,6 +36,11 @@ def _compiled(system, tab, proj, h, q0, steps):
     return S
 
 
+
+def _arg(sig, name):
+    from integrators.kernel import advance_argument
+    return advance_argument(sig, name)
+
 def test_every_builtin_pair_is_admitted_here():
     assert len(PAIRS) == 114
 
@@ -114,11 +119,11 @@ def test_one_compilation_serves_every_pair_and_every_parameter_value():
     for tab, proj in (("GLRK1", "none"), ("GLRK3", "symmetric"), ("LobIIIA3", "standard"), ("SRK3", "midpoint")):
         integrators.integrate(sy, q0, tab, proj, steps=2)
     integrators.integrate(sy.with_params(gamma1=0.3), q0, "GLRK2", "symplectic", steps=2)
-    real_4d = [sig for sig in kernel.advance.signatures if "complex" not in str(sig[10]) and "UniTuple(int64 x 4)"
-               in str(sig[11]) and str(sig[13]) == "UniTuple(int64 x 1)"]
+    real_4d = [sig for sig in kernel.advance.signatures if "complex" not in str(_arg(sig, "st_"))
+               and "UniTuple(int64 x 4)" in str(_arg(sig, "dim")) and str(_arg(sig, "proto")) == "UniTuple(int64 x 1)"]
     # (st_, dim, …, proto: one point of doubles is W = 1, (0,); a double-double state's proto is (0.0,),
     #  compiled by other tests of the same process)
-    assert len(real_4d) == 1, [str(s[10]) for s in real_4d]
+    assert len(real_4d) == 1, [str(_arg(s, "st_")) for s in real_4d]
     assert point_functions(sy)[0] is point_functions(sy.with_params(gamma1=0.3))[0]
 
 
@@ -171,7 +176,7 @@ def test_complex_step_through_the_compiled_newton_solve():
 
 @pytest.mark.skipif(np.finfo(np.longdouble).eps >= np.finfo(np.float64).eps, reason="long double is double here")
 def test_the_numpy_engine_in_long_double_has_no_double_round_off():
-    """The extended-precision reference of scripts/energy_drift.py: the numpy engine run on long
+    """The extended-precision reference of scripts/studies/results_energy_drift.py: the numpy engine run on long
     double arrays (Newton to 4 eps of long double, its Jacobian inverted in double).  GLRK6 +
     symmetric, 50 steps of h = 2 on guiding_centre_symmetric, against the exact flow.
 
@@ -238,8 +243,8 @@ def test_warm_compiles_the_width_a_call_will_take_and_advances_nothing():
     q0 = np.tile(sy.defaults["q0"], (kernel.WIDE_POINTS, 1))
 
     def widths():
-        return {len(sig[13]) for sig in kernel.advance.signatures
-                if "complex" not in str(sig[10]) and "UniTuple(int64 x 4)" in str(sig[11])}
+        return {len(_arg(sig, "proto")) for sig in kernel.advance.signatures
+                if "complex" not in str(_arg(sig, "st_")) and "UniTuple(int64 x 4)" in str(_arg(sig, "dim"))}
 
     for tab, proj, n, W in (("GLRK2", "symmetric", kernel.WIDE_POINTS, 16), ("GLRK4", "symmetric", 20, 8),
                             ("GLRK4", "symmetric", 5, 1)):
@@ -261,8 +266,8 @@ def test_compile_kernels_names_the_children_that_failed():
     from integrators.engine import compile_kernel, compile_kernels
     assert compile_kernels([(3, 8, "double")]) == [(3, 8, "double")]
     compile_kernel(2, 1)
-    assert any(str(sig[13]) == "UniTuple(int64 x 1)" and str(sig[11]) == "UniTuple(int64 x 2)"
-               and "complex" not in str(sig[10]) for sig in kernel.advance.signatures)
+    assert any(str(_arg(sig, "proto")) == "UniTuple(int64 x 1)" and str(_arg(sig, "dim")) == "UniTuple(int64 x 2)"
+               and "complex" not in str(_arg(sig, "st_")) for sig in kernel.advance.signatures)
 
 
 def test_one_specialisation_names_what_a_call_compiles():
