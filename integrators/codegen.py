@@ -22,8 +22,8 @@ from pathlib import Path
 
 from sympy.printing.numpy import NumPyPrinter
 
-CODEGEN_VERSION = "6"          # bump when the generated source changes shape (6: zero loops)
-DD_CODEGEN_VERSION = "3"       # ... and this when the double-double source does
+CODEGEN_VERSION = "7"          # bump when the generated source changes shape (7: codegen._variant)
+DD_CODEGEN_VERSION = "4"       # ... and this when the double-double source does
 
 
 def cache_dir() -> Path:
@@ -244,6 +244,33 @@ def _point_body(system, printer=None):
     return prelude + first, second
 
 
+_SIGNATURE = "types.void({p}, _F, types.boolean, {p}, {p}, {p}, {p}, {p})"
+_ARGS = "(_qin, _k, _need, _th, _T, _TT, _dH, _HH)"
+
+
+def _variant(name, body, *, pointer, proto, optional=False, lazy=None):
+    """The lines that compile a point function's ``body`` (its lines under the def) as one
+    specialisation: values of the numba type ``pointer`` points to, lanes as many as ``proto`` has
+    zeros (integers: double or complex; floats: double-double; the lane prototype of integrators.simd).
+
+    Eager (``lazy`` None): the cfunc ``name``, made when the module is imported; ``optional``: None
+    where the body has no form for this specialisation (a function without a lane form: the engine
+    runs W = 1).  Lazy: a function ``name()`` (``lazy`` its docstring) that compiles it when first
+    called, so that a specialisation nobody asks for is never compiled.  Every specialisation has a
+    name of its own: numba's cache tells functions apart by name, not by ``proto``."""
+    if lazy is None:
+        out = ["", f"_A = {pointer}", f"_P = {proto!r}", f"def _{name}{_ARGS}:", *body, ""]
+        make = f"cfunc({_SIGNATURE.format(p='_A')}, cache=True, error_model='numpy')(_{name})"
+        if not optional:
+            return out + [f"{name} = {make}"]
+        return out + ["try:", f"    {name} = {make}",
+                      "except Exception:     # a function without a lane form: the engine runs W = 1",
+                      f"    {name} = None"]
+    return ["", f"def {name}():", f'    """{lazy}"""', f"    _P = {proto!r}", "",
+            f"    def _{name}_{len(proto)}{_ARGS}:", *["    " + x for x in body], "",
+            f"    return cfunc({_SIGNATURE.format(p='_F')}, cache=True, error_model='numpy')(_{name}_{len(proto)})", ""]
+
+
 def _generate_source(system) -> str:
     from .kernel import LANES, WIDE
     d = system.d
@@ -256,24 +283,14 @@ def _generate_source(system) -> str:
              "import numpy", "from numba import cfunc, njit, types",
              "from integrators.simd import lanes, ld, st", *_field_import(system), "",
              "_F = types.CPointer(types.float64)"]
-    for name, A, W in (("evaluate_real", "float64", 1), ("evaluate_complex", "complex128", 1),
-                       ("evaluate_lanes", "float64", LANES)):
-        lines += ["", f"_A = types.CPointer(types.{A})", f"_P = {(0,) * W!r}",
-                  f"def _{name}(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *body, ""]
-        sig = "types.void(_A, _F, types.boolean, _A, _A, _A, _A, _A)"
-        if W == 1:
-            lines += [f"{name} = cfunc({sig}, cache=True, error_model='numpy')(_{name})"]
-        else:
-            lines += ["try:", f"    {name} = cfunc({sig}, cache=True, error_model='numpy')(_{name})",
-                      "except Exception:     # a function without a lane form: the engine runs W = 1",
-                      f"    {name} = None"]
-    # the same body on W = kernel.WIDE lanes, compiled when a pair with a small Newton system first
-    # asks for it (lanes_wide): a system used only with larger ones never pays its compilation
-    lines += ["", "def lanes_wide():", f"    \"\"\"The W = {WIDE} point function (compiled on first call).\"\"\"",
-              f"    _P = {(0,) * WIDE!r}", "",
-              "    def _evaluate_lanes_wide(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *["    " + x for x in body], "",
-              "    return cfunc(types.void(_F, _F, types.boolean, _F, _F, _F, _F, _F), cache=True, "
-              "error_model='numpy')(_evaluate_lanes_wide)", ""]
+    lines += _variant("evaluate_real", body, pointer="types.CPointer(types.float64)", proto=(0,))
+    lines += _variant("evaluate_complex", body, pointer="types.CPointer(types.complex128)", proto=(0,))
+    lines += _variant("evaluate_lanes", body, pointer="types.CPointer(types.float64)", proto=(0,) * LANES,
+                      optional=True)
+    # W = kernel.WIDE, compiled when a pair with a small Newton system first asks for it: a system
+    # used only with larger ones never pays its compilation
+    lines += _variant("lanes_wide", body, pointer="_F", proto=(0,) * WIDE,
+                      lazy=f"The W = {WIDE} point function (compiled on first call).")
     scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
     lines += ["", "", "@cfunc(types.void(_F, _F, _F), cache=True, error_model='numpy')",
               "def scalars(_qin, _k, _out):",
@@ -319,26 +336,19 @@ def generate_dd_source(system) -> str:
              "import numpy", "from numba import cfunc, types",
              "from integrators.ddouble import dd as _dd, dd_t", "from integrators.simd import lanes, ld, st",
              *_field_import(system), "",
-             "_F = types.CPointer(types.float64)", "_A = types.CPointer(dd_t)", "_P = (0.0,)", "",
-             "def _evaluate_dd(_qin, _k, _need, _th, _T, _TT, _dH, _HH):", *head, *first, "    if _need:", *second,
-             "        pass", "",
-             "evaluate_dd = cfunc(types.void(_A, _F, types.boolean, _A, _A, _A, _A, _A), cache=True, "
-             "error_model='numpy')(_evaluate_dd)", "", "",
-             "def _scalars_dd(_qin, _k, _out):",
+             "_F = types.CPointer(types.float64)"]
+    body = [*head, *first, "    if _need:", *second, "        pass"]
+    lines += _variant("evaluate_dd", body, pointer="types.CPointer(dd_t)", proto=(0.0,))
+    lines += ["", "", "def _scalars_dd(_qin, _k, _out):",
              "    \"\"\"H and the Noether momentum (0 when the system has none) at one point, in double-double.\"\"\"",
              "    _qin = lanes(_qin, 0, _P)", "    _out = lanes(_out, 0, _P)",
              *[f"    _q{i} = ld(_qin, {i})" for i in range(d)], *kdd,
              *sbody, "",
              "scalars_dd = cfunc(types.void(_A, _F, _A), cache=True, error_model='numpy')(_scalars_dd)", ""]
-    # the same body on W = kernel.LANES double-doubles (integrators/simd.py's DDVec), made when a
-    # double-double run of at least W points asks for it (lanes_dd)
-    lines += ["", "def lanes_dd():", "    \"\"\"The W-lane double-double point function (compiled on first call).\"\"\"",
-              f"    _P = {(0.0,) * LANES!r}", "",
-              "    def _evaluate_dd_lanes(_qin, _k, _need, _th, _T, _TT, _dH, _HH):",
-              *["    " + x for x in head], *["    " + x for x in first], "        if _need:",
-              *["    " + x for x in second], "            pass", "",
-              "    return cfunc(types.void(_F, _F, types.boolean, _F, _F, _F, _F, _F), cache=True, "
-              "error_model='numpy')(_evaluate_dd_lanes)", ""]
+    # W = kernel.LANES double-doubles (integrators/simd.py's DDVec), compiled when a double-double
+    # run of at least W points asks for it
+    lines += _variant("lanes_dd", body, pointer="_F", proto=(0.0,) * LANES,
+                      lazy="The W-lane double-double point function (compiled on first call).")
     return "\n".join(lines)
 
 
