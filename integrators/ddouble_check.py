@@ -1,7 +1,7 @@
 """The double-double number type (integrators/ddouble.py) measured against mpmath: each operation
 on plain (hi, lo) pairs, the functions with the domains they are measured on, samples with random low
 parts, and the error in units of 2⁻¹⁰⁴ relative (dd-ulps).  Shared by tests/test_ddouble.py and
-scripts/ddouble_accuracy.py (docs/engine.md).  The caller sets mpmath's precision (50 digits there)."""
+scripts/studies/engine_ddouble_accuracy.py (docs/engine.md).  The caller sets mpmath's precision (50 digits there)."""
 import mpmath
 import numpy as np
 from numba import njit

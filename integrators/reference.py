@@ -10,12 +10,12 @@ pair before the compiled engine; now it is
 * **the tests' independent oracle** of the compiled engine (tests/test_engine.py: 16 ulps after
   one step on every admissible pair of three systems, the same breakdowns, long runs that track
   each other) — a second statement of the equations in another language of arrays;
-* the engine of the long-double studies kept in the docs (scripts/convergence.py --extended,
-  scripts/energy_drift.py): on long double arrays it converges Newton to 4 eps of long double.
+* the engine of the long-double studies kept in the docs (scripts/studies/convergence_orders.py --extended,
+  scripts/studies/results_energy_drift.py): on long double arrays it converges Newton to 4 eps of long double.
   New studies below double use the compiled engine in double-double (docs/engine.md: the
   long-double path is retired as a precision);
 * the stopping-rule experiment's engine (``Stepper(accept_unconverged=True)``,
-  scripts/breakdown_sensitivity.py) and the "before" column of scripts/benchmark_core.py.
+  scripts/studies/stability_breakdown.py) and the "before" column of scripts/studies/benchmarks_core.py.
 
 Use::
 

@@ -30,7 +30,7 @@ This module makes that judgement a number::
 
 A series with non-finite values (a broken-down set) gets the law of its finite prefix; one with
 fewer than ``MIN_WINDOWS`` usable windows gets ``undetermined``.  The thresholds are validated on
-5,000 synthetic series and on the project's known results (scripts/growth_laws.py,
+5,000 synthetic series and on the project's known results (scripts/studies/growth_laws.py,
 docs/growth.md).
 """
 from __future__ import annotations
@@ -144,7 +144,7 @@ def _hinge(x, y, last):
 
 
 def growth_law_of_maxima(ends, maxima, roundoff=ROUNDOFF, peak=None):
-    """The verdict from window maxima already taken (e.g. scripts/stability.py's envelopes):
+    """The verdict from window maxima already taken (e.g. scripts/studies/stability_campaign.py's envelopes):
     ``ends`` increasing window end times, ``maxima`` the largest error in each window."""
     w, m = np.asarray(ends, dtype=float), np.asarray(maxima, dtype=float)
     good = np.isfinite(w) & np.isfinite(m) & (w > 0)
@@ -199,7 +199,7 @@ DRAWN = ("round-off", "bounded", "random walk", "linear", "faster")     # the la
 def synthetic_series(law, rng, n=None):
     """A synthetic error series (t, e) of a known law (one of :data:`DRAWN`), drawn from numpy's
     generator ``rng`` with random parameters and 0–30 % multiplicative noise, n samples (default 200
-    to 4,000): the classifier's validation set (docs/growth.md; scripts/growth_laws.py)."""
+    to 4,000): the classifier's validation set (docs/growth.md; scripts/studies/growth_laws.py)."""
     n = int(rng.integers(200, 4001)) if n is None else n
     t = np.arange(1, n + 1, dtype=float)
     T = t[-1]

@@ -9,7 +9,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _architecture():
-    spec = importlib.util.spec_from_file_location("architecture", ROOT / "scripts" / "architecture.py")
+    spec = importlib.util.spec_from_file_location("architecture", ROOT / "scripts" / "tools" / "architecture.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -118,8 +118,8 @@ def test_no_code_branches_on_a_projection_name():
 
 
 def test_the_architecture_page_is_what_the_source_gives():
-    """docs/architecture.md is generated (scripts/architecture.py): a changed import that was not
+    """docs/architecture.md is generated (scripts/tools/architecture.py): a changed import that was not
     regenerated is caught here (engine's imports of systems and tableaus were missing from it)."""
     text, graph, _ = _architecture().render()
     assert "| `integrators.kernel` |" in text and len(graph) > 20
-    assert (ROOT / "docs" / "architecture.md").read_text() == text, "run python scripts/architecture.py"
+    assert (ROOT / "docs" / "architecture.md").read_text() == text, "run python scripts/tools/architecture.py"

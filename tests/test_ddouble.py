@@ -1,6 +1,6 @@
 """The double-double number type (integrators/ddouble.py) against 50-digit mpmath: each operation
 and function over its domain, its error in units of 2⁻¹⁰⁴ relative (dd-ulps; measured at most
-1.91, scripts/ddouble_accuracy.py, docs/engine.md: the bounds here leave room for a libm whose
+1.91, scripts/studies/engine_ddouble_accuracy.py, docs/engine.md: the bounds here leave room for a libm whose
 double starting values differ in the last bit); the operators running ordinary code on
 double-doubles; the constants the nearest double-doubles."""
 import math

@@ -115,7 +115,7 @@ def test_a_dataset_that_claims_petabytes_is_one_line_and_resume_changes_no_byte(
 
 @pytest.mark.slow
 def test_a_few_flipped_bits_never_give_a_traceback_or_change_a_refused_file():
-    script = Path(__file__).parents[1] / "scripts" / "damaged_files.py"
+    script = Path(__file__).parents[1] / "scripts" / "studies" / "guide_damaged_files.py"
     r = subprocess.run([sys.executable, str(script), "--flips", "4", "--seed", "3", "--below", "40000",
                         "--offsets", "15062", "39781:5"], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr

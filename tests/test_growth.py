@@ -63,7 +63,7 @@ def test_fitted_law_passes_through_the_window_maxima():
 
 def test_synthetic_populations_are_classified_as_validated():
     """200 series of each law, drawn by invariants.growth.synthetic_series (fixed seed), as
-    scripts/growth_laws.py draws its 1,000: the share
+    scripts/studies/growth_laws.py draws its 1,000: the share
     classified right is at least what docs/growth.md reports for 1,000 each, less a margin for
     the smaller sample (reported there: 100, 90, 65, 97, 99 %)."""
     from invariants.growth import DRAWN, confusion

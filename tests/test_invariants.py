@@ -238,7 +238,7 @@ def test_first_invariant_in_fourier_space_has_less_round_off():
     sampling, Parseval's sum (spectral.loop_pairing, what first_invariant computes) against the
     trapezoidal rule of p·(inverse-FFT dq/dτ), measured: median 4.7e-13 against 2.8e-12, worst
     1.6e-12 against 9.1e-12."""
-    from invariants.samples import henon_loop      # the loop of the docs' table (scripts/invariants_roundoff.py)
+    from invariants.samples import henon_loop      # the loop of the docs' table (scripts/studies/invariants_roundoff.py)
     new, old = [], []
     for phase in np.random.default_rng(0).random(20):
         z = henon_loop(1000, phase)

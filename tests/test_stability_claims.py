@@ -1,4 +1,4 @@
-"""The cheap end of the stability campaign (scripts/stability.py, docs/stability.md).
+"""The cheap end of the stability campaign (scripts/studies/stability_campaign.py, docs/stability.md).
 
 Behaviours sec:app_lotka_volterra_2d reports for the Lotka–Volterra model at q0 = (1, 1) that a
 short run can check: the Lobatto IIIA–IIIB pair without projection breaks down after tens of
@@ -68,7 +68,7 @@ def test_radau_keeps_constraint_energy_drifts(lv):
 
 def test_stability_script_records_and_resumes(tmp_path):
     out = tmp_path / "a.jsonl"
-    cmd = [sys.executable, str(ROOT / "scripts" / "stability.py"), "run", "--case", "lotka_volterra",
+    cmd = [sys.executable, str(ROOT / "scripts" / "studies" / "stability_campaign.py"), "run", "--case", "lotka_volterra",
            "--steps", "40", "--pairs", "LobIIIA2:none", "GLRK1:symmetric", "--out", str(out)]
     subprocess.run(cmd, check=True, capture_output=True)
     recs = [json.loads(line) for line in out.read_text().splitlines()]
@@ -80,7 +80,7 @@ def test_stability_script_records_and_resumes(tmp_path):
 
 
 def test_glrk2_unprojected_breaks_down_near_step_74000_whatever_the_last_bits(lv):
-    """scripts/breakdown_sensitivity.py's cheap end: the unprojected GLRK2 run breaks down at step
+    """scripts/studies/stability_breakdown.py's cheap end: the unprojected GLRK2 run breaks down at step
     74,191 from p₀ = ϑ(q₀), and at 71,017 … 74,564 with p₀ moved by ±1–2 ulps (measured over 24
     patterns) — never near the paper's 250,000, so the last bits do not explain the difference."""
     q = np.array([[1.0, 1.0]])

@@ -13,7 +13,7 @@ on double-double inputs (truncation ~δ⁸ ≈ 1e-29, noise ~2⁻¹⁰⁴/δ ≈
 system's sympy expressions in mpmath at 40 digits, with the parameters' doubles taken exactly;
 the pull-back in mpmath.  Each study measures its own floor (:func:`defect_study_dd`: the same
 defects with a four times smaller step); :data:`DEFECT_FLOOR_DD` is the least it may be
-(scripts/defect_dd.py --floor).  Only built-in pairs (the engine's); a user's step map runs in
+(scripts/studies/audit_defect_dd.py --floor).  Only built-in pairs (the engine's); a user's step map runs in
 double.
 """
 from __future__ import annotations

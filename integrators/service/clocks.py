@@ -2,7 +2,7 @@
 
 A pair's clock (:func:`pair_clock`) is what ``poincare run`` records per pair and rank
 (``PairSummary.timings``, and every rank's under ``per_rank``) and what the cost model of
-scripts/scaling.py reads.  :class:`Spent` keeps the rank's seconds outside the advance over the
+scripts/studies/scaling_model.py reads.  :class:`Spent` keeps the rank's seconds outside the advance over the
 whole run, any pair's, so that the rates a rank reports for the balance of the next pair
 (:meth:`Spent.rates`) count the other pairs' lagged work as work, not as slow advancing.
 """

@@ -8,7 +8,7 @@ them), and the next pair's plan (from rank 0).  Every send is non-blocking; a re
 Messages go through mpi4py's ``util.pkl5``: pickle protocol 5, with large arrays sent as their own
 buffers instead of copied into the pickle; with the parts stacked over a batch
 (tasks.Tasks.stack), 2.2–2.5 GB/s between 2 ranks here against 0.49–0.70 GB/s before
-(``scripts/scaling.py measure --again transport``; docs/scaling.md).  Those buffers are the sender's own arrays until the send
+(``scripts/studies/scaling_model.py measure --again transport``; docs/scaling.md).  Those buffers are the sender's own arrays until the send
 completes, so everything sent must be a copy that nobody changes afterwards: the sets' parts and
 the pieces are (tasks.Tasks.parts, driver._Stream.take).
 """

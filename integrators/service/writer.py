@@ -87,7 +87,7 @@ class Writer:
 
     def finish_pair(self, pair, clocks):
         """Once a pair's last rows are written: its status and growth laws, and its clocks (every
-        rank's, for the cost model, scripts/scaling.py); returns every rank's clock."""
+        rank's, for the cost model, scripts/studies/scaling_model.py); returns every rank's clock."""
         clock = pair.clock
         clocks = [dict(clock, points=pair.block[1] - pair.block[0])] + clocks
         clock["per_rank"] = clocks

@@ -1,7 +1,7 @@
 """Audit every built-in tableau × projection (docs/audit.md).
 
-    python scripts/audit_builtin.py [--out docs/figures/audit_builtin.json] [--tableaus GLRK1 ...]
-    python scripts/audit_builtin.py --signs     # only the midpoint projection with either sign (its table)
+    python scripts/studies/audit_builtin.py [--out docs/figures/audit_builtin.json] [--tableaus GLRK1 ...]
+    python scripts/studies/audit_builtin.py --signs     # only the midpoint projection with either sign (its table)
 
 For each pair: invariant drift and one-step defects on the 'default' scene
 (guiding_centre_symmetric, h = 10, 100 steps), and one-step defects on the
@@ -20,7 +20,7 @@ from integrators import audit
 from integrators.engine import Engine
 from integrators.service.scene import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFECT_SCENES = ("guiding_centre_tokamak", "point_vortices")
 
 

@@ -1,9 +1,9 @@
 """One-step Ω̄ defects and their orders in double-double, where double's audit hits its floor
 (docs/audit.md, "Defect orders below double's floor").
 
-    python scripts/defect_dd.py [--scenes point_vortices massless_charged_particle]
+    python scripts/studies/audit_defect_dd.py [--scenes point_vortices massless_charged_particle]
                                 [--tableaus GLRK1 … SRK3] [--levels 5] [--json docs/figures/defect_dd.json]
-    python scripts/defect_dd.py --floor      # the floor: GLRK3-standard on the charged particle at small h,
+    python scripts/studies/audit_defect_dd.py --floor      # the floor: GLRK3-standard on the charged particle at small h,
                                              # with three central-difference steps
 
 Each scene's audit points (4 points of its loop, as `poincare audit` takes them) and h, h/2, …,
@@ -27,7 +27,7 @@ from integrators.audit import defect_dd
 from integrators.projections import PROJECTIONS, admission
 from integrators.service.scene import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def audit_points(scene):
@@ -59,7 +59,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.floor:
         return floor()
-    out = {"command": "python scripts/defect_dd.py " + " ".join(argv or __import__("sys").argv[1:]),
+    out = {"command": "python scripts/studies/audit_defect_dd.py " + " ".join(argv or __import__("sys").argv[1:]),
            "floor_dd": defect_dd.DEFECT_FLOOR_DD, "scenes": {}}
     for name in args.scenes:
         scene = load_scene(name)

@@ -1,8 +1,8 @@
 """The audit of black-box canonical step maps at scale (docs/audit.md, "Step maps in any dimension").
 
-    python scripts/audit_maps.py                       # every table (~15 min on 2 cores)
-    python scripts/audit_maps.py --only pendula pic     # some of them
-    python scripts/audit_maps.py --json docs/figures/audit_maps.json
+    python scripts/studies/audit_maps.py                       # every table (~15 min on 2 cores)
+    python scripts/studies/audit_maps.py --only pendula pic     # some of them
+    python scripts/studies/audit_maps.py --json docs/figures/audit_maps.json
 
 * ``pendula``: `poincare audit --map pendula-strang` and `pendula-rk2` (each map its own process),
   k = 1,024 and 4,096 pendula, a 1,024-point loop, 100 steps, defects at 3 step sizes: wall time,
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 POINCARE = str(Path(sys.executable).parent / "poincare")
 
 

@@ -1,6 +1,6 @@
 """The compiled step engine against the numpy engine it replaced, side by side (docs/benchmarks.md).
 
-    python scripts/benchmark_core.py [--points 10000] [--out docs/figures/benchmark_core.json]
+    python scripts/studies/benchmarks_core.py [--points 10000] [--out docs/figures/benchmark_core.json]
 
 Measured in one run on this machine, every number next to the one it is compared with:
 
@@ -35,7 +35,7 @@ import integrators
 import invariants
 from integrators.engine import get_threads, march, set_threads
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 from integrators import reference
 
 
@@ -170,7 +170,7 @@ def main():
 
     meta = dict(machine=platform.platform(), processor=platform.processor(), python=platform.python_version(),
                 numpy=np.__version__, numba=__import__("numba").__version__, cores=cores, points=args.points,
-                steps=args.steps, command=" ".join(["python", "scripts/benchmark_core.py"] + sys.argv[1:]))
+                steps=args.steps, command=" ".join(["python", "scripts/studies/benchmarks_core.py"] + sys.argv[1:]))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(dict(meta=meta, rows=rows, single=single, tokamak=tokamak,
                                               startup=dict(empty_cache=first, cached=cached),

@@ -2,7 +2,7 @@
 the long-double numpy reference, in point-steps per second on one thread; and the double runs'
 distance from the double-double one after the same steps.
 
-    python scripts/double_double.py [--points 1000] [--steps 20] [--system guiding_centre_symmetric]
+    python scripts/studies/benchmarks_double_double.py [--points 1000] [--steps 20] [--system guiding_centre_symmetric]
                                     [--h 10] [--tableaus GLRK2 GLRK4] [--json docs/figures/double_double.json]
 
 Each engine is timed after a warm-up call (compilation excluded), best of --repeat.
@@ -101,7 +101,7 @@ def main(argv=None):
         out["double-double W=8 / long double"] = out["double-double W=8"] / out["long double (numpy reference)"]
         out["double-double W=1 / long double"] = out["double-double W=1"] / out["long double (numpy reference)"]
         rows.append(out)
-    meta = {"command": "python scripts/double_double.py " + " ".join(argv or __import__("sys").argv[1:]),
+    meta = {"command": "python scripts/studies/benchmarks_double_double.py " + " ".join(argv or __import__("sys").argv[1:]),
             "machine": platform.processor() or platform.machine(), "threads": 1, "points": args.points,
             "steps": args.steps, "system": args.system, "h": args.h, "rows": rows}
     for r in rows:

@@ -1,6 +1,6 @@
 """The lane kernel against the scalar kernel it replaced, side by side in one run (docs/benchmarks.md).
 
-    python scripts/engine_lanes.py [--points 10000] [--previous 0581e1c] [--out docs/figures/engine_lanes.json]
+    python scripts/studies/benchmarks_lanes.py [--points 10000] [--previous 0581e1c] [--out docs/figures/engine_lanes.json]
 
 * The previous kernel (integrators/kernel.py at ``--previous``, one point at a time) is read from
   git history into a temporary module and driven with the same generated point functions, so both
@@ -17,6 +17,7 @@
   step, over the clock: flop per cycle before and after.
 """
 import argparse
+import functools
 import importlib.util
 import json
 import os
@@ -36,7 +37,7 @@ from integrators import kernel
 from integrators.codegen import _load, point_functions
 from integrators.engine import _lagrange_matrix, set_threads
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAIRS = [("GLRK2", "symmetric"), ("GLRK1", "none"), ("SRK3", "symmetric"), ("GLRK4", "symmetric"),
          ("LobIIIA3", "standard"), ("GLRK2", "symplectic"), ("GLRK3", "midpoint")]
 FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "live", "iterations", "steps")
@@ -68,7 +69,7 @@ def asm_counts():
     """Packed vs scalar double arithmetic in the compiled kernel (``advance`` with everything it
     calls linked in) for d = 4, W = 1 and W = LANES.  numba shows no assembly of cached code, so this
     compiles afresh in a child process with an empty numba cache (about two minutes)."""
-    code = ("import json, numpy as np, integrators, sys; sys.path.insert(0, %r); import engine_lanes; "
+    code = ("import json, numpy as np, integrators, sys; sys.path.insert(0, %r); import benchmarks_lanes as engine_lanes; "
             "sy = integrators.system('guiding_centre_symmetric'); "
             "eng = integrators.Engine(sy, integrators.tableau('GLRK2'), 'symmetric', 10.0); "
             "[eng.advance(eng.state(np.tile(sy.defaults['q0'], (8, 1))), 1, 1, lanes=W) for W in (1, %d)]; "
@@ -83,11 +84,12 @@ def _asm_here():
     pat_p = re.compile(r"\bv(add|sub|mul|div|sqrt|min|max)pd\b")
     pat_s = re.compile(r"\bv(add|sub|mul|div|sqrt|min|max)sd\b")
     for sig in kernel.advance.signatures:
-        if "complex" in str(sig[10]) or "UniTuple(int64 x 4)" not in str(sig[11]):
+        arg = functools.partial(kernel.advance_argument, sig)
+        if "complex" in str(arg("st_")) or "UniTuple(int64 x 4)" not in str(arg("dim")):
             continue
         asm = kernel.advance.inspect_asm(sig)
         packed, scalar = len(pat_p.findall(asm)), len(pat_s.findall(asm))
-        out[len(sig[13])] = {"packed": packed, "scalar": scalar, "packed_share": packed / max(1, packed + scalar)}
+        out[len(arg("proto"))] = {"packed": packed, "scalar": scalar, "packed_share": packed / max(1, packed + scalar)}
     return out
 
 
@@ -223,7 +225,7 @@ def main():
           f"({ovs['output_back_to_back_in_steps']:.2f} back to back)")
     out = dict(machine=platform.processor() or platform.machine(), clock_hz=hz, points=args.points,
                previous=args.previous, lanes=kernel.LANES, rows=rows, asm=asm, output_vs_step=ovs,
-               command="python scripts/engine_lanes.py --points %d" % args.points)
+               command="python scripts/studies/benchmarks_lanes.py --points %d" % args.points)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1))
 

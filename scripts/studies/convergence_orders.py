@@ -8,10 +8,10 @@ round-off, so no reference floor remains.  Errors at T = 2 for h = 2^-1 … 2^-9
 least-squares slope of log error against log h over the last three h before the error first falls to
 the quantity's round-off floor (FLOORS: where double-precision round-off of the method takes over).
 
-    python scripts/convergence.py            # writes docs/convergence.md and docs/figures/convergence.json
-    python scripts/convergence.py --extended # docs/figures/convergence_extended.json, then docs/convergence.md
-    python scripts/convergence.py --double-double  # docs/figures/convergence_double_double.json, then docs/convergence.md
-    python scripts/convergence.py --from-json   # docs/convergence.md from the JSON files
+    python scripts/studies/convergence_orders.py            # writes docs/convergence.md and docs/figures/convergence.json
+    python scripts/studies/convergence_orders.py --extended # docs/figures/convergence_extended.json, then docs/convergence.md
+    python scripts/studies/convergence_orders.py --double-double  # docs/figures/convergence_double_double.json, then docs/convergence.md
+    python scripts/studies/convergence_orders.py --from-json   # docs/convergence.md from the JSON files
 
 --extended runs every pair again in x87 long double (64-bit significand: round-off 2,000 times below
 double's) on the numpy engine of integrators/reference.py (the compiled engine's oracle, same equations,
@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 
 import integrators
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 T = 2.0
 HS = [2.0 ** -k for k in range(1, 10)]
 TABLEAUS = ["GLRK1", "GLRK2", "GLRK3", "GLRK4", "GLRK5", "GLRK6", "LobIIIA2", "LobIIIA3", "LobIIIA4",
@@ -231,7 +231,7 @@ DISCUSSION = """
 ## Disagreements, investigated
 
 Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
-(`python scripts/convergence_plots.py`).
+(`python scripts/studies/convergence_plots.py`).
 
 * **In double-double the undecided high-order cells are decided** (the table above: every
   non-Lobatto pair, errors down to 1e-31 … 1e-33 against a 40-digit reference). GLRK5 + standard /
@@ -295,7 +295,7 @@ Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
 
 ## SRK3 + standard: energy order 3, not 4
 
-Followed to round-off (`python scripts/srk3_standard_order.py`; energy and momentum errors against
+Followed to round-off (`python scripts/studies/convergence_srk3_standard.py`; energy and momentum errors against
 t = 0, no reference solution):
 
 | h | energy error | local order | momentum error | local order |
@@ -333,9 +333,9 @@ def write_markdown(data, wall):
     ext_data = json.loads(ext_path.read_text()) if ext_path.exists() else {"runs": []}
     ext = {(r["tableau"], r["projection"]): r for r in ext_data["runs"]}
     lines = ["# Convergence orders on point vortices", "",
-             "Produced by `python scripts/convergence.py` (wall time %.0f s, the reference included; raw "
+             "Produced by `python scripts/studies/convergence_orders.py` (wall time %.0f s, the reference included; raw "
              "errors in `docs/figures/convergence.json`)" % wall
-             + (f" and `python scripts/convergence.py --extended` (long double, wall time {ext_data.get('wall_s', 0):.0f} s; "
+             + (f" and `python scripts/studies/convergence_orders.py --extended` (long double, wall time {ext_data.get('wall_s', 0):.0f} s; "
                "`docs/figures/convergence_extended.json`)." if ext else "."), "",
              "Setup: point vortices with γ = (0.1, 0.1), q₀ = (1, 0.1, 1, −0.1), T = 2, h = 2⁻¹ … 2⁻⁹. "
              "Reference: mpmath's Taylor integrator in 30 digits on Ω̄ q̇ = ∇H (against 36 digits: "
@@ -377,7 +377,7 @@ def write_markdown(data, wall):
         dd = json.loads(dd_path.read_text())
         fl = dd["floors"]
         lines += ["", "## In double-double: the orders without double's floor", "",
-                  f"`python scripts/convergence.py --double-double` (wall time {dd.get('wall_s', 0):.0f} s; "
+                  f"`python scripts/studies/convergence_orders.py --double-double` (wall time {dd.get('wall_s', 0):.0f} s; "
                   "`docs/figures/convergence_double_double.json`): every non-Lobatto pair run by the compiled "
                   "kernel in double-double (~32 digits; docs/engine.md), h = 2⁻¹ … 2⁻⁹, errors against a "
                   "40-digit reference (π exact), energy and momentum evaluated in double-double, the floors "

@@ -1,6 +1,6 @@
 """Convergence plots of every pair whose measured order differs from the paper by more than 0.5.
 
-    python scripts/convergence_plots.py     # reads docs/figures/convergence.json, writes docs/figures/convergence_disagreements.png
+    python scripts/studies/convergence_plots.py     # reads docs/figures/convergence.json, writes docs/figures/convergence_disagreements.png
 """
 import json
 from pathlib import Path
@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main():

@@ -1,9 +1,9 @@
 """The energy order of SRK3 with the standard projection on point vortices, followed to round-off
 (docs/convergence.md, "SRK3 + standard: energy order 3, not 4").
 
-    python scripts/srk3_standard_order.py
+    python scripts/studies/convergence_srk3_standard.py
 
-Setup of scripts/convergence.py (γ = (0.1, 0.1), q₀ = (1, 0.1, 1, −0.1), T = 2), h = 2⁻¹ … 2⁻¹³:
+Setup of scripts/studies/convergence_orders.py (γ = (0.1, 0.1), q₀ = (1, 0.1, 1, −0.1), T = 2), h = 2⁻¹ … 2⁻¹³:
 the energy error max_t |H − H₀| and the angular-momentum error max_t |P − P₀|, the local order
 log₂(e(2h)/e(h)), and a least-squares fit e(h) = a h⁴ + b h³ (relative residuals) over the h whose
 energy error is above 1e-14.  No reference solution is involved: both errors are against t = 0.

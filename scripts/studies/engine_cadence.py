@@ -1,7 +1,7 @@
 """Results do not depend on how often a run is looked at (docs/engine.md, "What it promises").
 
-    python scripts/cadence.py                      # three built-in systems, then the STEP file (~3 min)
-    python scripts/cadence.py --json docs/figures/cadence.json
+    python scripts/studies/engine_cadence.py                      # three built-in systems, then the STEP file (~3 min)
+    python scripts/studies/engine_cadence.py --json docs/figures/cadence.json
 
 1. Three built-in scenes' loops (guiding_centre_tokamak GLRK2-none, point_vortices GLRK2-symmetric,
    lotka_volterra SRK3-symplectic), 40 steps through ``integrate`` with ``save_every`` 1, 8 and 40:

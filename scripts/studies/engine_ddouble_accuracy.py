@@ -2,7 +2,7 @@
 largest and the median error over random samples of its domain, in units of 2⁻¹⁰⁴ relative
 ("dd-ulps": the last bit of a double-double).  Prints the table that docs/engine.md holds.
 
-    python scripts/ddouble_accuracy.py [--samples 2000] [--seed 0]
+    python scripts/studies/engine_ddouble_accuracy.py [--samples 2000] [--seed 0]
 """
 from __future__ import annotations
 

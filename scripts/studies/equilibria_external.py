@@ -1,9 +1,9 @@
 """G-EQDSK files written by other codes, read with no COCOS given and run from their own defaults
 (docs/equilibria.md, "Files from other codes").
 
-    python scripts/equilibria_external.py                 # fetch the files, run every scene (~10 min)
-    python scripts/equilibria_external.py --steps 100     # a shorter run of each
-    python scripts/equilibria_external.py --json docs/figures/equilibria_external.json
+    python scripts/studies/equilibria_external.py                 # fetch the files, run every scene (~10 min)
+    python scripts/studies/equilibria_external.py --steps 100     # a shorter run of each
+    python scripts/studies/equilibria_external.py --json docs/figures/equilibria_external.json
 
 The files come from packages on PyPI that ship them as test data (``pip download --no-deps``, into a
 temporary folder; nothing is installed): a DIII-D EFIT file (omas), the STEP SCENE file, the same with
@@ -28,7 +28,7 @@ from integrators.equilibrium import system_from_geqdsk
 from integrators.service import driver
 from integrators.service.scene import equilibrium_scene, parse_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FILES = [  # (package, path in its wheel, the code that wrote it)
     ("omas==0.95.2", "omas/samples/g145419.02100", "EFIT (DIII-D shot 145419, 2.1 s)"),
     ("pyrokinetics==0.9.1", "pyrokinetics/templates/step.geqdsk", "SCENE (STEP)"),

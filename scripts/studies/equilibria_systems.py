@@ -1,6 +1,6 @@
 """The G-EQDSK equilibrium systems measured (issue 44; docs/equilibria.md, docs/benchmarks.md).
 
-    python scripts/equilibria.py [--out docs/figures/equilibria.json] [--figures docs/figures]
+    python scripts/studies/equilibria_systems.py [--out docs/figures/equilibria.json] [--figures docs/figures]
 
 * **Convergence**: the Solov'ev equilibrium written to G-EQDSK files (17 digits) on 17² … 257² grids
   against ``guiding_centre_solovev`` at 200 random points inside the plasma: the largest differences
@@ -26,7 +26,7 @@ import integrators
 from integrators.engine import set_threads
 from integrators.equilibrium import read_geqdsk, system_from_geqdsk, write_solovev
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "integrators/service/scenes/freegs_dn.geqdsk"
 NAMES = ("theta", "H", "dtheta", "dH", "ddtheta", "ddH")
 
@@ -156,7 +156,7 @@ def main():
     args = ap.parse_args()
     rows, orders = convergence()
     res = dict(machine=platform.processor() or platform.machine(), date=time.strftime("%Y-%m-%d"),
-               command="python scripts/equilibria.py", convergence=rows, orders=orders, orbit=orbit(), cost=cost())
+               command="python scripts/studies/equilibria_systems.py", convergence=rows, orders=orders, orbit=orbit(), cost=cost())
     fig = Path(args.figures)
     fig.mkdir(parents=True, exist_ok=True)
     convergence_figure(rows, orders, fig / "equilibria_convergence.png")

@@ -1,6 +1,6 @@
 """The growth-law classifier (invariants.growth) validated: synthetic series and the known results.
 
-    python scripts/growth_laws.py [--series 1000] [--out docs/figures/growth_laws.json]
+    python scripts/studies/growth_laws.py [--series 1000] [--out docs/figures/growth_laws.json]
 
 * **Synthetic series**, ``--series`` of each law, each with random parameters and noise:
   - round-off: a random walk of round-off, |Σ ε_k| with ε_k ~ N(0, (1e-16…1e-15)²), or a bounded
@@ -26,7 +26,7 @@ import numpy as np
 
 from invariants.growth import DRAWN, LAWS, confusion, growth_law, growth_law_of_maxima
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 def _r(x):
     return float(f"{x:.3g}")
 

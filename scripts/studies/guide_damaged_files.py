@@ -4,8 +4,8 @@ crash, and a refused or failed resume leaves the file byte for byte as it was.  
 must be called damaged, never locked or busy (HDF5's message for a bad superblock names the
 'sblock').
 
-    python scripts/damaged_files.py [--flips 30] [--seed 1] [--offsets 15062 39781:5 ...] [--below BYTES]
-    python scripts/damaged_files.py --flips 0 --truncate     # every 512 bytes up to the first dataset, and a few beyond
+    python scripts/studies/guide_damaged_files.py [--flips 30] [--seed 1] [--offsets 15062 39781:5 ...] [--below BYTES]
+    python scripts/studies/guide_damaged_files.py --flips 0 --truncate     # every 512 bytes up to the first dataset, and a few beyond
 
 Prints one line per flip or cut and a summary; exits 1 if any broke a rule.  (The test suite runs a
 few of the same checks: tests/test_files.py.)"""

@@ -1,6 +1,6 @@
 """Spectral convergence of I₁ and I₂ against closed-form values (docs/invariants.md).
 
-    python scripts/invariants_convergence.py
+    python scripts/studies/invariants_convergence.py
 
 Loop: the paper's guiding-centre loop and the same loop advected by the exact flow
 to t = 500 (rotation by 2μt/(1 + r²), strongly sheared).  Surface: the paper's
@@ -16,7 +16,7 @@ import integrators
 import invariants
 from invariants.samples import band_limited_loop
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GC = integrators.system("guiding_centre_symmetric")
 
 
@@ -101,7 +101,7 @@ def main():
     I1x, I2x, I1s, I2s = exact_values()
     I1x, I2x = float(I1x), float(I2x)
     lines = ["# Invariants: spectral convergence", "",
-             "Produced by `python scripts/invariants_convergence.py`. Exact values (sympy): "
+             "Produced by `python scripts/studies/invariants_convergence.py`. Exact values (sympy): "
              f"I₁ = `{sympy.simplify(I1s)}` = {I1x:.17g} for the paper's loop, "
              f"I₂ = `{sympy.simplify(I2s)}` = {I2x:.17g} for the paper's surface "
              "(guiding_centre_symmetric, B₀ = 1, μ = 0.01). 'advected' = the same set moved by the exact flow "
@@ -133,7 +133,7 @@ def main():
               "for N = 64 to 2000; with Parseval it reads 0 to 8.4e-16. On PoincareInvariants.jl's 4-D Hénon "
               "map (the unit circle in both (qᵢ, pᵢ) planes, two maps, I₁ = 2π exactly, a trigonometric "
               "polynomial of degree 16), |I₁ − 2π| over 20 phases of the sampling "
-              "(`python scripts/invariants_roundoff.py`):", ""]
+              "(`python scripts/studies/invariants_roundoff.py`):", ""]
     from invariants_roundoff import errors
     lines += ["| N | Parseval: median | worst | trapezoid of FFT derivative: median | worst |", "|---|---|---|---|---|"]
     for N in (250, 500, 1000, 2000, 4000, 8000, 16000):

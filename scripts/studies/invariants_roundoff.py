@@ -1,8 +1,8 @@
 """Round-off of I₁: Parseval's sum in Fourier space against the trapezoidal rule of the inverse-FFT
 derivative, on PoincareInvariants.jl's 4-D Hénon map (docs/invariants.md, "Round-off of I₁"; the table
-there is printed by scripts/invariants_convergence.py, which calls errors() below).
+there is printed by scripts/studies/invariants_convergence.py, which calls errors() below).
 
-    python scripts/invariants_roundoff.py
+    python scripts/studies/invariants_roundoff.py
 
 The unit circle in both (qᵢ, pᵢ) planes, mapped twice: I₁ = ∮ p·dq = 2π exactly, and the loop is a
 trigonometric polynomial of degree 16, so every N here resolves it and the error is round-off only.

@@ -2,9 +2,9 @@
 passing tokamak orbit, by the paper's 10-interval rule, with three coefficient sets and against an
 extended-precision run.
 
-    python scripts/energy_drift.py double [--steps 1000000] [--json docs/figures/energy_drift.json]
-    python scripts/energy_drift.py extended GLRK5 [--steps 200000] [--json docs/figures/energy_drift_extended.json]
-    python scripts/energy_drift.py double-double GLRK3 GLRK4 GLRK5 GLRK6 [--steps 1250000] [--json docs/figures/energy_drift_double_double.json]
+    python scripts/studies/results_energy_drift.py double [--steps 1000000] [--json docs/figures/energy_drift.json]
+    python scripts/studies/results_energy_drift.py extended GLRK5 [--steps 200000] [--json docs/figures/energy_drift_extended.json]
+    python scripts/studies/results_energy_drift.py double-double GLRK3 GLRK4 GLRK5 GLRK6 [--steps 1250000] [--json docs/figures/energy_drift_double_double.json]
 
 (R, Z, φ, u) = (2.5, 0, 0, 0.3425), h = 2.5 (app:guiding_centre_dynamics).  The run is split into 10
 intervals of equal length; each interval's value is max |H − H₀|/|H₀| over it (sampled every

@@ -1,9 +1,9 @@
 """A per-phase cost model of `poincare run`, measured here and used to predict 1 to 1,024 ranks.
 
-    python scripts/scaling.py measure [--steps 1000] [--hybrid]   # ~17 min on 2 cores: docs/figures/scaling.json
-    python scripts/scaling.py measure --again 2x1                 # one run again, the rest of the file kept
-    python scripts/scaling.py measure --again checkpoints         # per-rank checkpoints: costs, 2 ranks side by side
-    python scripts/scaling.py predict                 # the model: tables for docs/scaling.md and a PNG
+    python scripts/studies/scaling_model.py measure [--steps 1000] [--hybrid]   # ~17 min on 2 cores: docs/figures/scaling.json
+    python scripts/studies/scaling_model.py measure --again 2x1                 # one run again, the rest of the file kept
+    python scripts/studies/scaling_model.py measure --again checkpoints         # per-rank checkpoints: costs, 2 ranks side by side
+    python scripts/studies/scaling_model.py predict                 # the model: tables for docs/scaling.md and a PNG
 
 measure:
   A. the paper scene (paper_poincare: loop 2,000, surface 100 × 100, 15 pairs; ``--steps`` steps),
@@ -44,9 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "scripts"))
-import benchmark_service as bs  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "scripts" / "studies"))
+import scaling_service as bs  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "scaling.json"
 FORMS = ("canonical", "noncanonical", "corrected")
@@ -270,7 +270,7 @@ def measure(steps, hybrid=False, again=None):
     if again == "transport":      # the driver's messages (pkl5), as the model's exchange rate
         res = json.loads(OUT.read_text())
         res["transport"] = dict(transport_cost(), measured=time.strftime("%Y-%m-%d %H:%M") +
-                                " by python scripts/scaling.py measure --again transport",
+                                " by python scripts/studies/scaling_model.py measure --again transport",
                                 before={f"{p} points, {k} outputs": transport_cost(p, k, before=True)["bytes_per_second"]
                                         for p, k in ((12000, 10), (12000, 60), (100000, 10))},
                                 now={f"{p} points, {k} outputs": transport_cost(p, k)["bytes_per_second"]
@@ -282,7 +282,7 @@ def measure(steps, hybrid=False, again=None):
         res = json.loads(OUT.read_text())
         res["checkpoints"] = dict(slab=slab_cost(), link=link_cost(), side_by_side=checkpoint_runs(),
                                   measured=time.strftime("%Y-%m-%d %H:%M") +
-                                  " by python scripts/scaling.py measure --again checkpoints")
+                                  " by python scripts/studies/scaling_model.py measure --again checkpoints")
         OUT.write_text(json.dumps(res, indent=1))
         return
     if again == "costs":
@@ -298,7 +298,7 @@ def measure(steps, hybrid=False, again=None):
                 run = bs.measure(bs.scene_text("p", steps, **PAIRS), 1, tmp, out_name="busy.h5", threads=1)
         finally:
             hog.kill()
-        run["measured"] = time.strftime("%Y-%m-%d %H:%M") + " by python scripts/scaling.py measure --again 1x1-busy"
+        run["measured"] = time.strftime("%Y-%m-%d %H:%M") + " by python scripts/studies/scaling_model.py measure --again 1x1-busy"
         res.setdefault("1x1-busy", []).append(run)
         print(again, run["wall"], flush=True)
         OUT.write_text(json.dumps(res, indent=1))
@@ -313,14 +313,14 @@ def measure(steps, hybrid=False, again=None):
         with tempfile.TemporaryDirectory() as tmp:
             res[again] = bs.measure(bs.scene_text("p", steps, **PAIRS), ranks, tmp, out_name=f"{again}.h5",
                                     threads=threads)
-        res[again]["measured"] = time.strftime("%Y-%m-%d %H:%M") + f" by python scripts/scaling.py measure --again {again}"
+        res[again]["measured"] = time.strftime("%Y-%m-%d %H:%M") + f" by python scripts/studies/scaling_model.py measure --again {again}"
         print(again, res[again]["wall"], flush=True)
         OUT.write_text(json.dumps(res, indent=1))
         return
     text = bs.scene_text("p", steps, **PAIRS)
     res = {"meta": dict(machine=platform.platform(), python=platform.python_version(), steps=steps,
                         scene=f"paper_poincare cut to {steps} steps", cores=2,
-                        command=f"python scripts/scaling.py measure --steps {steps}" + (" --hybrid" if hybrid else ""),
+                        command=f"python scripts/studies/scaling_model.py measure --steps {steps}" + (" --hybrid" if hybrid else ""),
                         date=time.strftime("%Y-%m-%d %H:%M"))}
     with tempfile.TemporaryDirectory() as tmp:
         runs = (("1x1", 1, 1), ("2x1", 2, 1)) + ((("1x2", 1, 2),) if hybrid else ())
@@ -632,7 +632,7 @@ def predict(args):
     ax.set_ylabel("predicted speed-up")
     ax.legend(fontsize=5.5)
     ax.grid(True, which="both", lw=0.3)
-    ax.set_title("strong scaling predicted batch by batch (scripts/scaling.py predict)", fontsize=10)
+    ax.set_title("strong scaling predicted batch by batch (scripts/studies/scaling_model.py predict)", fontsize=10)
     fig.tight_layout()
     png = ROOT / "docs" / "figures" / "scaling_model.png"
     fig.savefig(png, dpi=80)

@@ -1,6 +1,6 @@
 """Does MPI deliver a large message while its sender is busy outside MPI?
 
-    .venv/bin/mpiexec -n 2 .venv/bin/python scripts/mpi_progress.py
+    .venv/bin/mpiexec -n 2 .venv/bin/python scripts/studies/scaling_mpi_progress.py
 
 Rank 1 posts a non-blocking send of a pickled 20 MB array and then computes for 2 s without calling
 MPI; rank 0 starts receiving after 0.5 s.  If the receive ends near 0.5 s, the MPI library moves the
@@ -22,7 +22,7 @@ def busy(seconds):
 def main():
     comm = MPI.COMM_WORLD
     if comm.size != 2:
-        raise SystemExit("run it on 2 ranks: mpiexec -n 2 python scripts/mpi_progress.py")
+        raise SystemExit("run it on 2 ranks: mpiexec -n 2 python scripts/studies/scaling_mpi_progress.py")
     comm.Barrier()
     t0 = time.perf_counter()
     if comm.rank == 1:

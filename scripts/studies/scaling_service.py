@@ -1,6 +1,6 @@
 """Service benchmarks (docs/scaling.md): what skipping saves, and MPI scaling.
 
-    python scripts/benchmark_service.py [--steps 100] [--out docs/figures/benchmark_service.json]
+    python scripts/studies/scaling_service.py [--steps 100] [--out docs/figures/benchmark_service.json]
 
 A. Skip what the scene does not need: GLRK2-symmetric on guiding_centre_symmetric,
    h = 10, `--steps` steps, output every 10: loop only (2,000 points), loop + surface
@@ -25,7 +25,7 @@ E. ``--contention``: what two busy cores cost each other on this machine.  The p
    any 2-rank speed-up here is 2 · T_alone / T_together; written to
    docs/figures/benchmark_contention.json.
 
-Each measurement is a child process: ``[mpiexec -n K] python scripts/benchmark_service.py
+Each measurement is a child process: ``[mpiexec -n K] python scripts/studies/scaling_service.py
 --child SCENE OUT``, which runs the driver and prints one JSON line from rank 0.
 """
 import argparse
@@ -39,7 +39,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 BASE = """
 name = "{name}"

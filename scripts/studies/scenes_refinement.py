@@ -12,8 +12,8 @@ It reports each run's wall time, its seconds advancing the scene's points, the s
 points took (the catch-up and after), the outputs resolved and the status, and checks that the
 refining run's values at the outputs taken on the finest level are bitwise the ``finest`` run's.
 
-    python scripts/refinement.py                       # GLRK2-symmetric and SRK3-standard
-    python scripts/refinement.py --pairs GLRK2-symplectic --json docs/figures/refinement.json
+    python scripts/studies/scenes_refinement.py                       # GLRK2-symmetric and SRK3-standard
+    python scripts/studies/scenes_refinement.py --pairs GLRK2-symplectic --json docs/figures/refinement.json
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from integrators.service import driver  # noqa: E402
 from integrators.service.api import scene_text  # noqa: E402

@@ -1,7 +1,7 @@
 """Which details move the step at which an unprojected even-stage Gauss–Legendre run breaks down on
 Lotka–Volterra (docs/stability.md, "Why GLRK2 breaks down at step 74,564 and not 250,000").
 
-    python scripts/breakdown_sensitivity.py [--pairs GLRK2 GLRK4] [--steps 1000000] [--json out.json]
+    python scripts/studies/stability_breakdown.py [--pairs GLRK2 GLRK4] [--steps 1000000] [--json out.json]
 
 The paper's case: lotka_volterra_2d, q₀ = (1, 1), h = 0.1, no projection.  Variants, each a batch of
 points advanced together (points are independent; the engine is bitwise the same for any batch):
@@ -11,7 +11,7 @@ points advanced together (points are independent; the engine is bitwise the same
   plain double    the same baseline with the coefficients rounded to double (corrections dropped)
 For each: the breakdown step (or "completed") of every point, and the spread over the batch.
 
-    python scripts/breakdown_sensitivity.py --newton-tol 8.9e-16 1e-12 1e-10 [--steps 150000]
+    python scripts/studies/stability_breakdown.py --newton-tol 8.9e-16 1e-12 1e-10 [--steps 150000]
 
 runs GLRK2 instead on the numpy engine of integrators/reference.py (the compiled engine's oracle, same
 rules) with Newton's convergence tolerance set to each value: max |δ|/scale ≤ tol (4 eps = 8.9e-16
@@ -19,7 +19,7 @@ in both engines).  With --engine compiled, this study and --stopping-rule run on
 engine instead (its tolerances are runtime data, integrators.Tolerances; --pairs applies), in
 seconds rather than hours.
 
-    python scripts/breakdown_sensitivity.py --stopping-rule [--pairs GLRK2] [--steps 400000] [--json out.json]
+    python scripts/studies/stability_breakdown.py --stopping-rule [--pairs GLRK2] [--steps 400000] [--json out.json]
 
 the stopping rule, on the numpy engine: ours declares a point broken down when its Newton iteration
 has not converged after 40 iterations, from the extrapolated guess and once more from a fresh one;

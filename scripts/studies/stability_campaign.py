@@ -1,8 +1,8 @@
 """Long-time stability campaign of sec:numerical_experiments (docs/stability.md).
 
-    python scripts/stability.py run  --case lotka_volterra --steps 1000000 [--pairs GLRK1:none ...]
+    python scripts/studies/stability_campaign.py run  --case lotka_volterra --steps 1000000 [--pairs GLRK1:none ...]
                                      [--shard 0/2] [--out docs/figures/stability/a.jsonl]
-    python scripts/stability.py report [--dir docs/figures/stability]      # markdown tables + PNGs
+    python scripts/studies/stability_campaign.py report [--dir docs/figures/stability]      # markdown tables + PNGs
 
 Cases, with the paper's initial conditions and time steps:
   lotka_volterra          q0 = (1, 1), h = 0.1                     (sec:app_lotka_volterra_2d)
@@ -35,7 +35,7 @@ import integrators
 from integrators import PROJECTIONS, TABLEAU_NAMES
 from integrators.integrate import integrate
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DIR = ROOT / "docs" / "figures" / "stability"
 ORBITS = {"deeply_trapped": (0.1, 5.0), "barely_trapped": (0.3375, 3.0),
           "barely_passing": (0.3425, 2.5), "deeply_passing": (0.5, 2.5)}

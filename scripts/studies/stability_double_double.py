@@ -1,7 +1,7 @@
 """The paper's questions that lie under double's round-off, re-run in double-double
 (integrators.integrate(..., precision="double-double"); docs/results.md, "Below double precision").
 
-    python scripts/double_double_studies.py lv-breakdown [--steps 400000] [--pairs GLRK2 GLRK4] [--json F] [--png F]
+    python scripts/studies/stability_double_double.py lv-breakdown [--steps 400000] [--pairs GLRK2 GLRK4] [--json F] [--png F]
 
 lv-breakdown: the unprojected Gauss–Legendre runs on Lotka–Volterra (q₀ = (1, 1), h = 0.1, p₀ = ϑ(q₀)),
 the paper's breakdown case (about 250,000 steps for GLRK2 in the paper, 74,191 in double here): the
@@ -54,7 +54,7 @@ def main(argv=None):
     ap.add_argument("--png", default=None)
     args = ap.parse_args(argv)
     out = lv_breakdown(args)
-    out["command"] = "python scripts/double_double_studies.py " + " ".join(argv or __import__("sys").argv[1:])
+    out["command"] = "python scripts/studies/stability_double_double.py " + " ".join(argv or __import__("sys").argv[1:])
     if args.png:
         import matplotlib
         matplotlib.use("Agg")

@@ -1,10 +1,10 @@
 """Work–precision: wall time against error, VPRK pairs against scipy (docs/work_precision.md).
 
-    python scripts/work_precision.py trajectory [--systems ...] [--points 16]
+    python scripts/studies/work_precision.py trajectory [--systems ...] [--points 16]
                                          # docs/figures/work_precision/<system>.json (<system>_1.json: 1 point)
-    python scripts/work_precision.py invariants [--steps 10000]   # docs/figures/work_precision/invariants.json
-    python scripts/work_precision.py plot                         # docs/figures/work_precision*.png
-    python scripts/work_precision.py table                        # the markdown tables of docs/work_precision.md
+    python scripts/studies/work_precision.py invariants [--steps 10000]   # docs/figures/work_precision/invariants.json
+    python scripts/studies/work_precision.py plot                         # docs/figures/work_precision*.png
+    python scripts/studies/work_precision.py table                        # the markdown tables of docs/work_precision.md
 
 trajectory
     For each system, 16 points near the paper's initial condition, advanced to T = 64 h₀ (h₀ the
@@ -36,9 +36,9 @@ from scipy.sparse import block_diag
 import integrators
 from integrators.integrate import integrate
 from invariants import forms, samples
-from stability import all_pairs as admissible_pairs    # scripts/stability.py: every pair a tableau admits
+from stability import all_pairs as admissible_pairs    # scripts/studies/stability_campaign.py: every pair a tableau admits
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FIG = ROOT / "docs" / "figures"
 DATA = FIG / "work_precision"
 NPOINTS = 16

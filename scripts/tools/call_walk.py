@@ -1,7 +1,7 @@
 """The walk of a `poincare run` argument through the package: which files the calls that carry it
 visit, in order, and how often the walk returns to a file it had left (issue 42's measure).
 
-    python scripts/call_walk.py [scene]          # default: the built-in lotka_volterra scene
+    python scripts/tools/call_walk.py [scene]          # default: the built-in lotka_volterra scene
 
 The run is made in this process with ``--steps 40`` into a temporary file, under ``sys.setprofile``.
 A call is on the walk when one of its arguments is the parsed command line (an argparse Namespace)

@@ -1,9 +1,9 @@
 """Run built-in scenes and report, per pair, the status and the largest resolution monitor of each set.
 
-    python scripts/check_scenes.py                      # every built-in scene (paper_poincare: ~17 min)
-    python scripts/check_scenes.py default lotka_volterra
-    python scripts/check_scenes.py --json docs/figures/scenes_resolution.json
-    python scripts/check_scenes.py --keep runs/       # keep the run files (then: poincare plot runs/NAME.h5)
+    python scripts/tools/check_scenes.py                      # every built-in scene (paper_poincare: ~17 min)
+    python scripts/tools/check_scenes.py default lotka_volterra
+    python scripts/tools/check_scenes.py --json docs/figures/scenes_resolution.json
+    python scripts/tools/check_scenes.py --keep runs/       # keep the run files (then: poincare plot runs/NAME.h5)
 
 The evidence behind "the shipped scenes' summaries show no under-resolved set" (docs/scenes.md):
 the monitor is invariants.forms' relative size of the top eighth of the modes, largest over the forms

@@ -1,8 +1,8 @@
 """The compiled engine's results and speed, for comparing two versions of the kernel side by side.
 
-    python scripts/engine_bits.py dump FILE.npz      # every admissible pair on three systems, 15 steps
-    python scripts/engine_bits.py compare A.npz B.npz
-    python scripts/engine_bits.py speed              # point-steps/s, 10^4 points, 1 thread, best of 3
+    python scripts/tools/engine_bits.py dump FILE.npz      # every admissible pair on three systems, 15 steps
+    python scripts/tools/engine_bits.py compare A.npz B.npz
+    python scripts/tools/engine_bits.py speed              # point-steps/s, 10^4 points, 1 thread, best of 3
 
 Run ``dump`` and ``speed`` on each version (e.g. in a clone checked out at the older commit, with its
 own numba cache), then ``compare``.  The change that made Newton's tolerances runtime data was
@@ -52,7 +52,7 @@ def speed():
     integrators.set_threads(1)
     sy = integrators.system("guiding_centre_symmetric")
     q0 = invariants.loop("guiding_centre", 10000)
-    for tab, proj in (("GLRK2", "symmetric"), ("GLRK1", "none")):
+    for tab, proj in (("GLRK2", "symmetric"), ("GLRK2", "symplectic"), ("GLRK1", "none")):
         e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0)
         best = []
         for _ in range(3):

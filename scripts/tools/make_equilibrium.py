@@ -5,7 +5,7 @@ FreeGS 0.8.2 runs only with numpy < 2 and scipy < 1.14, which the project's runt
 so this script runs in an environment of its own (two commands, Python 3.11):
 
     python3 -m venv /tmp/fgs && /tmp/fgs/bin/pip install "freegs==0.8.2" "numpy<2" "scipy<1.14" "matplotlib<3.10"
-    /tmp/fgs/bin/python scripts/make_equilibrium.py [--out integrators/service/scenes/freegs_dn.geqdsk]
+    /tmp/fgs/bin/python scripts/tools/make_equilibrium.py [--out integrators/service/scenes/freegs_dn.geqdsk]
 
 The equilibrium is FreeGS's own free-boundary example (its README and examples/01-freeboundary.py):
 the test tokamak (freegs.machine.TestTokamak, four pairs of poloidal field coils around R ≈ 1 m),
@@ -20,7 +20,7 @@ negative; the system does not use q's sign (only |q|, to check ψ's normalisatio
 import argparse
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main():

@@ -1,7 +1,7 @@
 """The shipped scenes' run files, for comparing two versions of the code bit for bit.
 
-    python scripts/scene_bits.py run OUTDIR [--ranks 2] [--scenes default lotka_volterra ...]
-    python scripts/scene_bits.py compare DIR_A DIR_B
+    python scripts/tools/scene_bits.py run OUTDIR [--ranks 2] [--scenes default lotka_volterra ...]
+    python scripts/tools/scene_bits.py compare DIR_A DIR_B
 
 ``run`` runs every built-in scene (or those named) with this checkout's command line into OUTDIR
 (``mpiexec -n RANKS``; the files are the same for any rank count) and writes OUTDIR/digests.json: a

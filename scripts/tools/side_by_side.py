@@ -1,11 +1,11 @@
 """The step engine at this commit against an earlier one, side by side on this machine (issue 43).
 
-    python scripts/side_by_side.py --base 083b6cf [--rounds 5] [--out docs/figures/side_by_side.json]
+    python scripts/tools/side_by_side.py --base 083b6cf [--rounds 5] [--out docs/figures/side_by_side.json]
 
 The earlier commit is checked out into a temporary git worktree with its own numba cache; each
 round runs one child process per tree (this script with ``--measure``, ``integrators`` imported
 from that tree), alternating which goes first, and the medians over the rounds are reported.
-What a child measures, one thread, guiding_centre_symmetric at h = 10, scripts/benchmark_core.py's
+What a child measures, one thread, guiding_centre_symmetric at h = 10, scripts/studies/benchmarks_core.py's
 protocol (10⁴ points, 2 warm-up steps, then 10 steps in one call; best of 3):
 
 * ``loop``: the points near the default loop (Gaussian 1e-3), ``box``: the same number of points
@@ -16,7 +16,7 @@ protocol (10⁴ points, 2 warm-up steps, then 10 steps in one call; best of 3):
 
 Both trees' states after the timed steps are written to .npz files and compared field by field:
 the rows say whether every point's bits are the same.  Flop per cycle uses the flop count of one
-Newton iteration as coded (scripts/engine_lanes.py, Jacobian refreshes left out: a lower bound)
+Newton iteration as coded (scripts/studies/benchmarks_lanes.py, Jacobian refreshes left out: a lower bound)
 times the measured iterations per step, over the clock /proc/cpuinfo reports.
 """
 import argparse
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LANE_PAIRS = (("GLRK2", "symmetric"), ("GLRK1", "none"), ("SRK3", "symmetric"), ("GLRK4", "symmetric"))
 ORBIT_PAIRS = (("GLRK1", "none"), ("GLRK2", "symmetric"), ("GLRK4", "symmetric"), ("GLRK6", "symmetric"))
 FIELDS = ("q", "p", "Lam", "iterations", "breakdown_time")
@@ -90,9 +90,9 @@ def measure(dump):
 
 def flops(tab, proj):
     """Flop of one step as coded, per point, at the measured iterations (filled in by the caller)."""
-    sys.path.insert(0, str(ROOT / "scripts"))
+    sys.path.insert(0, str(ROOT / "scripts" / "studies"))
     import integrators
-    from engine_lanes import flops_per_iteration
+    from benchmarks_lanes import flops_per_iteration
     gc = integrators.system("guiding_centre_symmetric")
     t = integrators.tableau(tab)
     return flops_per_iteration(gc, t, integrators.Engine(gc, t, proj, 10.0))
@@ -163,7 +163,7 @@ def write(path, script, args, rows, **extra):
     out = dict(machine=platform.processor() or platform.machine(), **extra, base=args.base,
                this=subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                                    text=True).stdout.strip(), rounds=args.rounds, date=time.strftime("%Y-%m-%d"),
-               command=f"python scripts/{script} --base {args.base} --rounds {args.rounds}", rows=rows)
+               command=f"python scripts/tools/{script} --base {args.base} --rounds {args.rounds}", rows=rows)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(json.dumps(out, indent=1))
     print(f"wrote {path}")
