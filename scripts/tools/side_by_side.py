@@ -16,7 +16,7 @@ protocol (10⁴ points, 2 warm-up steps, then 10 steps in one call; best of 3):
 
 Both trees' states after the timed steps are written to .npz files and compared field by field:
 the rows say whether every point's bits are the same.  Flop per cycle uses the flop count of one
-Newton iteration as coded (scripts/studies/benchmarks_lanes.py, Jacobian refreshes left out: a lower bound)
+Newton iteration as coded (scripts/studies/engine_lanes.py, Jacobian refreshes left out: a lower bound)
 times the measured iterations per step, over the clock /proc/cpuinfo reports.
 """
 import argparse
@@ -92,7 +92,7 @@ def flops(tab, proj):
     """Flop of one step as coded, per point, at the measured iterations (filled in by the caller)."""
     sys.path.insert(0, str(ROOT / "scripts" / "studies"))
     import integrators
-    from benchmarks_lanes import flops_per_iteration
+    from engine_lanes import flops_per_iteration
     gc = integrators.system("guiding_centre_symmetric")
     t = integrators.tableau(tab)
     return flops_per_iteration(gc, t, integrators.Engine(gc, t, proj, 10.0))

@@ -1,6 +1,6 @@
 """The lane kernel against the scalar kernel it replaced, side by side in one run (docs/benchmarks.md).
 
-    python scripts/studies/benchmarks_lanes.py [--points 10000] [--previous 0581e1c] [--out docs/figures/engine_lanes.json]
+    python scripts/studies/engine_lanes.py [--points 10000] [--previous 0581e1c] [--out docs/figures/engine_lanes.json]
 
 * The previous kernel (integrators/kernel.py at ``--previous``, one point at a time) is read from
   git history into a temporary module and driven with the same generated point functions, so both
@@ -69,7 +69,7 @@ def asm_counts():
     """Packed vs scalar double arithmetic in the compiled kernel (``advance`` with everything it
     calls linked in) for d = 4, W = 1 and W = LANES.  numba shows no assembly of cached code, so this
     compiles afresh in a child process with an empty numba cache (about two minutes)."""
-    code = ("import json, numpy as np, integrators, sys; sys.path.insert(0, %r); import benchmarks_lanes as engine_lanes; "
+    code = ("import json, numpy as np, integrators, sys; sys.path.insert(0, %r); import engine_lanes; "
             "sy = integrators.system('guiding_centre_symmetric'); "
             "eng = integrators.Engine(sy, integrators.tableau('GLRK2'), 'symmetric', 10.0); "
             "[eng.advance(eng.state(np.tile(sy.defaults['q0'], (8, 1))), 1, 1, lanes=W) for W in (1, %d)]; "
@@ -225,7 +225,7 @@ def main():
           f"({ovs['output_back_to_back_in_steps']:.2f} back to back)")
     out = dict(machine=platform.processor() or platform.machine(), clock_hz=hz, points=args.points,
                previous=args.previous, lanes=kernel.LANES, rows=rows, asm=asm, output_vs_step=ovs,
-               command="python scripts/studies/benchmarks_lanes.py --points %d" % args.points)
+               command="python scripts/studies/engine_lanes.py --points %d" % args.points)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1))
 
