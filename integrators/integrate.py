@@ -99,10 +99,13 @@ def _checked_points(system, q0, p0, lam0):
     return q0, lead, p0, lam0
 
 
-def integrate(system, q0, tableau="GLRK2", projection="symmetric", *, h=None, steps=100, save_every=1,
+def integrate(system, q0, *, tableau="GLRK2", projection="symmetric", h=None, steps=100, save_every=1,
               p0=None, lam0=None, t0=0.0, progress: Callable[[int, int], None] | None = None,
               chunk: int | None = None, precision: str = "double", tolerances: Tolerances | None = None) -> Solution:
     """Integrate points of a degenerate Lagrangian system with a (projected) VPRK method.
+
+    Every argument after ``q0`` is keyword-only: ``integrate(system, q0, tableau="GLRK4",
+    projection="midpoint", h=0.1, steps=1000)``.
 
     Parameters
     ----------

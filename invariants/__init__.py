@@ -6,7 +6,7 @@
     S = invariants.surface("guiding_centre", 100, 100)          # (nσ, nτ, d)
     I2 = invariants.second_invariant(S, "noncanonical", system=sys)
     I1.value, I1.resolution, I1.under_resolved
-    sol = integrators.integrate(sys, S, "GLRK2", "symmetric", h=10, steps=100, save_every=10)
+    sol = integrators.integrate(sys, S, tableau="GLRK2", projection="symmetric", h=10, steps=100, save_every=10)
     series = invariants.along(sol, "noncanonical", system=sys)  # I₂ at every saved time
 """
 from .forms import (FORMS, UNDER_RESOLVED, InvariantSeries, InvariantValue, along, corrected_omega, first_invariant,

@@ -32,7 +32,7 @@ def test_huge_step_breaks_points_down_without_an_exception():
     gc = integrators.system("guiding_centre_symmetric")
     q0 = invariants.loop("guiding_centre", 16)
     for proj in integrators.PROJECTIONS:
-        sol = integrators.integrate(gc, q0, "GLRK2", proj, h=1e6, steps=3)
+        sol = integrators.integrate(gc, q0, tableau="GLRK2", projection=proj, h=1e6, steps=3)
         done = ~np.isfinite(sol.breakdown_time)
         # every point either finished or is frozen at its last good, finite state
         assert np.all(np.isfinite(sol.q[-1])), proj
@@ -43,9 +43,9 @@ def test_non_finite_momentum_of_one_point_does_not_touch_the_others():
     gc = integrators.system("guiding_centre_symmetric")
     q0 = invariants.loop("guiding_centre", 8)
     p0 = gc.theta(q0)
-    good = integrators.integrate(gc, q0, "GLRK2", "none", h=10.0, steps=5, p0=p0)
+    good = integrators.integrate(gc, q0, tableau="GLRK2", projection="none", h=10.0, steps=5, p0=p0)
     p0[3, 1] = np.nan
-    bad = integrators.integrate(gc, q0, "GLRK2", "none", h=10.0, steps=5, p0=p0)
+    bad = integrators.integrate(gc, q0, tableau="GLRK2", projection="none", h=10.0, steps=5, p0=p0)
     assert bad.breakdown_time[3] == 10.0 and np.isinf(np.delete(bad.breakdown_time, 3)).all()
     keep = np.arange(8) != 3
     assert np.array_equal(bad.q[:, keep], good.q[:, keep])          # bitwise: points are independent
@@ -59,19 +59,20 @@ def test_non_finite_momentum_of_one_point_does_not_touch_the_others():
 def test_initial_points_on_the_boundary_or_not_finite_are_refused(q, msg):
     lv = integrators.system("lotka_volterra_2d")
     with pytest.raises(ValueError, match=msg):
-        integrators.integrate(lv, q, "GLRK2", "symmetric", h=0.1, steps=2)
+        integrators.integrate(lv, q, tableau="GLRK2", projection="symmetric", h=0.1, steps=2)
 
 
 def test_point_next_to_the_domain_boundary_is_handled():
     lv = integrators.system("lotka_volterra_2d")
-    sol = integrators.integrate(lv, [[1e-300, 1.0], [1.0, 1.0]], "GLRK2", "symmetric", h=0.1, steps=5)
+    sol = integrators.integrate(lv, [[1e-300, 1.0], [1.0, 1.0]], tableau="GLRK2", projection="symmetric",
+                                h=0.1, steps=5)
     assert np.isinf(sol.breakdown_time[1])                           # the ordinary point goes on
     assert np.all(np.isfinite(sol.q[-1]))
 
 
 def test_single_point():
     pv = integrators.system("point_vortices")
-    sol = integrators.integrate(pv, [1.0, 0.1, 1.0, -0.1], "GLRK2", "symmetric", h=0.1, steps=10)
+    sol = integrators.integrate(pv, [1.0, 0.1, 1.0, -0.1], tableau="GLRK2", projection="symmetric", h=0.1, steps=10)
     assert sol.q.shape == (11, 1, 4) and np.isinf(sol.breakdown_time[0])
 
 
@@ -109,7 +110,8 @@ def test_results_and_breakdowns_do_not_depend_on_the_output_cadence(scene, pair,
     from integrators.service.scene import load_scene
     sc = load_scene(scene)
     q0 = sc.loop_points()[::8]
-    sols = [integrators.integrate(sc.system(), q0, *pair, h=h, steps=40, save_every=k) for k in (1, 8, 40)]
+    sols = [integrators.integrate(sc.system(), q0, tableau=pair[0], projection=pair[1], h=h, steps=40,
+                                  save_every=k) for k in (1, 8, 40)]
     steps = sols[0].breakdown_time[np.isfinite(sols[0].breakdown_time)] / h
     assert 0 < steps.size < len(q0) or len(np.unique(steps)) > 1, "the case must break points down at several steps"
     for s in sols[1:]:

@@ -83,7 +83,8 @@ def test_order_six_below_double_round_off():
     q0 = [[1.2, 0.9]]
 
     def final(h):
-        sol = integrators.integrate(sy, q0, "GLRK3", "standard", h=h, steps=round(1.0 / h), save_every=round(1.0 / h),
+        sol = integrators.integrate(sy, q0, tableau="GLRK3", projection="standard",
+                                    h=h, steps=round(1.0 / h), save_every=round(1.0 / h),
                                     precision="double-double")
         return [value(sol.q[-1, 0, m], sol.q_lo[-1, 0, m]) for m in range(2)]
 
@@ -96,15 +97,17 @@ def test_order_six_below_double_round_off():
 
 def test_integrate_returns_the_low_parts():
     sy = integrators.system("lotka_volterra_2d")
-    sol = integrators.integrate(sy, [[1.2, 0.9], [1.0, 1.1]], "GLRK2", "symmetric", h=0.1, steps=10, save_every=5,
+    sol = integrators.integrate(sy, [[1.2, 0.9], [1.0, 1.1]], tableau="GLRK2", projection="symmetric",
+                                h=0.1, steps=10, save_every=5,
                                 precision="double-double")
     assert sol.precision == "double-double" and sol.q.shape == sol.q_lo.shape == (3, 2, 2)
     assert np.all(np.abs(sol.q_lo) <= np.spacing(np.abs(sol.q)))          # |lo| ≤ ½ ulp(hi), normalised
-    double = integrators.integrate(sy, [[1.2, 0.9], [1.0, 1.1]], "GLRK2", "symmetric", h=0.1, steps=10, save_every=5)
+    double = integrators.integrate(sy, [[1.2, 0.9], [1.0, 1.1]], tableau="GLRK2", projection="symmetric",
+                                   h=0.1, steps=10, save_every=5)
     assert double.q_lo is None and np.max(np.abs(double.q - sol.q)) < 1e-13
     assert np.array_equal(sol.q[0], [[1.2, 0.9], [1.0, 1.1]]) and not sol.q_lo[0].any()
     with pytest.raises(ValueError, match="precision"):
-        integrators.integrate(sy, [[1.2, 0.9]], "GLRK2", "none", h=0.1, steps=2, precision="quad")
+        integrators.integrate(sy, [[1.2, 0.9]], tableau="GLRK2", projection="none", h=0.1, steps=2, precision="quad")
 
 
 @pytest.mark.parametrize("sysname,q0", [("point_vortices", [1.0, 0.1, 1.0, -0.1]),

@@ -102,7 +102,8 @@ def test_bits_do_not_depend_on_threads_or_blocks(rng):
     runs = []
     for threads, block in ((1, 64), (2, 64), (2, 1), (1, 7), (2, 1000)):
         set_threads(threads)
-        sol = integrators.integrate(sy, q0, "SRK3", "symmetric", steps=30, save_every=10, chunk=block)
+        sol = integrators.integrate(sy, q0, tableau="SRK3", projection="symmetric",
+                                    steps=30, save_every=10, chunk=block)
         runs.append(sol.q)
     set_threads(None)
     for r in runs[1:]:
@@ -117,8 +118,8 @@ def test_one_compilation_serves_every_pair_and_every_parameter_value():
     sy = integrators.system("point_vortices")
     q0 = np.array([sy.defaults["q0"]])
     for tab, proj in (("GLRK1", "none"), ("GLRK3", "symmetric"), ("LobIIIA3", "standard"), ("SRK3", "midpoint")):
-        integrators.integrate(sy, q0, tab, proj, steps=2)
-    integrators.integrate(sy.with_params(gamma1=0.3), q0, "GLRK2", "symplectic", steps=2)
+        integrators.integrate(sy, q0, tableau=tab, projection=proj, steps=2)
+    integrators.integrate(sy.with_params(gamma1=0.3), q0, tableau="GLRK2", projection="symplectic", steps=2)
     real_4d = [sig for sig in kernel.advance.signatures if "complex" not in str(_arg(sig, "st_"))
                and "UniTuple(int64 x 4)" in str(_arg(sig, "dim")) and str(_arg(sig, "proto")) == "UniTuple(int64 x 1)"]
     # (st_, dim, …, proto: one point of doubles is W = 1, (0,); a double-double state's proto is (0.0,),

@@ -132,14 +132,14 @@ def test_an_orbit_stays_within_the_interpolation_error(solovev_files):
     sol = integrators.system("guiding_centre_solovev")
     q0 = np.array([sol.defaults["q0"]])
     kw = dict(h=2.5, steps=10_000, save_every=50)
-    ref = integrators.integrate(sol, q0, "GLRK2", "symmetric", **kw)
-    nudged = integrators.integrate(sol, q0 * (1 + np.finfo(float).eps), "GLRK2", "symmetric", **kw)
+    ref = integrators.integrate(sol, q0, tableau="GLRK2", projection="symmetric", **kw)
+    nudged = integrators.integrate(sol, q0 * (1 + np.finfo(float).eps), tableau="GLRK2", projection="symmetric", **kw)
     floor = np.max(np.abs(nudged.q[..., [0, 1, 3]] - ref.q[..., [0, 1, 3]]))
     path = ref.q.reshape(-1, 4)
     dev, field = {}, {}
     for n in (33, 65):
         sy = system_from_geqdsk(solovev_files[n], mu=0.01)
-        got = integrators.integrate(sy, q0, "GLRK2", "symmetric", **kw)
+        got = integrators.integrate(sy, q0, tableau="GLRK2", projection="symmetric", **kw)
         assert np.isinf(got.breakdown_time).all()
         dev[n] = np.max(np.abs(got.q[..., [0, 1, 3]] - ref.q[..., [0, 1, 3]]))
         field[n] = max(np.max(np.abs(sy.theta(path) - sol.theta(path))), np.max(np.abs(sy.dH(path) - sol.dH(path))))
@@ -199,7 +199,7 @@ def test_double_double_runs_in_the_spline_field(shipped):
     eng.advance(a, 1, 20, lanes=1)
     eng.advance(b, 1, 20)
     assert a.live.all() and np.array_equal(a.q, b.q)
-    d = integrators.integrate(shipped, q0, "GLRK2", "symmetric", h=120.0, steps=20, save_every=20)
+    d = integrators.integrate(shipped, q0, tableau="GLRK2", projection="symmetric", h=120.0, steps=20, save_every=20)
     assert np.max(np.abs(d.q[-1] - a.q[..., 0]) / np.abs(a.q[..., 0]).clip(1e-3)) < 1e-12
 
 
@@ -210,7 +210,7 @@ def test_points_that_leave_the_plasma_break_down(shipped):
     v = shipped.defaults["speed"]
     q0 = np.array([PASSING, PASSING + [0.0, 0.0, 0.0, 0.0]])
     q0[1, 3] = 40 * v                      # a Larmor radius of 40 % of the minor radius
-    res = integrators.integrate(shipped, q0, "GLRK2", "symmetric", h=10.0, steps=400, save_every=400)
+    res = integrators.integrate(shipped, q0, tableau="GLRK2", projection="symmetric", h=10.0, steps=400, save_every=400)
     assert np.isinf(res.breakdown_time[0]) and 0 < res.breakdown_time[1] < 4000
     assert not shipped.in_domain(np.array([[1.0, -0.8, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0]])).any()
 
@@ -316,7 +316,7 @@ def test_the_monitor_flags_the_stretched_loop_of_the_shipped_equilibrium(shipped
     and leaves the 1,024 (error 2e-11 against 16,384, measured) resolved."""
     from invariants import spectral
     q0 = invariants.loop("ellipse", 1024, d=4, center=list(PASSING), radii=[0.001, 0.001], plane=[0, 1])
-    sol = integrators.integrate(shipped, q0, "GLRK2", "none", h=120.0, steps=1000, save_every=1000)
+    sol = integrators.integrate(shipped, q0, tableau="GLRK2", projection="none", h=120.0, steps=1000, save_every=1000)
     q, p = sol.q[-1], sol.p[-1]
     for form in ("canonical", "noncanonical"):
         ref = invariants.first_invariant(q, form, system=shipped, p=p)
@@ -361,7 +361,8 @@ def test_the_shipped_equilibrium_keeps_what_the_methods_promise(shipped):
     def errors(tab, proj):
         out = {}
         for name, pts in (("I1", loop), ("I2", surf.reshape(-1, 4))):
-            r = integrators.integrate(shipped, pts, tab, proj, h=h, steps=steps, save_every=steps // 10)
+            r = integrators.integrate(shipped, pts, tableau=tab, projection=proj,
+                                      h=h, steps=steps, save_every=steps // 10)
             assert np.isinf(r.breakdown_time).all()
             vals = []
             for k in range(r.q.shape[0]):
@@ -463,7 +464,8 @@ def test_the_default_orbits_are_well_passing_and_well_trapped(shipped):
     q = float(np.interp(0.3, np.linspace(0, 1, read_geqdsk(SHIPPED).q.size), np.abs(read_geqdsk(SHIPPED).q)))
     assert float(f"{2 * math.pi * q * d['q0'][0] / d['q0'][3] / 320:.2g}") == d["h"]
     for start, passes in ((d["q0"], True), (d["trapped"], False)):
-        sol = integrators.integrate(shipped, [start], "GLRK2", "symmetric", h=d["h"], steps=640, save_every=4)
+        sol = integrators.integrate(shipped, [start], tableau="GLRK2", projection="symmetric",
+                                    h=d["h"], steps=640, save_every=4)
         u = sol.q[:, 0, 3]
         assert not np.isfinite(sol.breakdown_time).any()
         assert (np.all(u > 0) if passes else (u.min() < 0 < u.max())), (passes, u.min(), u.max())

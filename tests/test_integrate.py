@@ -91,8 +91,9 @@ def test_tolerances_reach_the_engine():
     sy = integrators.system("guiding_centre_symmetric")
     q0 = np.array(sy.defaults["q0"])[None]
     rule = integrators.Tolerances(refresh=0.1)
-    fast = integrators.integrate(sy, q0, "GLRK4", "symmetric", h=10.0, steps=200, save_every=200, tolerances=rule)
-    plain = integrators.integrate(sy, q0, "GLRK4", "symmetric", h=10.0, steps=200, save_every=200)
+    fast = integrators.integrate(sy, q0, tableau="GLRK4", projection="symmetric",
+                                 h=10.0, steps=200, save_every=200, tolerances=rule)
+    plain = integrators.integrate(sy, q0, tableau="GLRK4", projection="symmetric", h=10.0, steps=200, save_every=200)
     eng = integrators.Engine(sy, integrators.tableau("GLRK4"), "symmetric", 10.0, tolerances=rule)
     st = eng.state(q0)
     eng.advance(st, 1, 200)
@@ -101,4 +102,17 @@ def test_tolerances_reach_the_engine():
     assert not np.array_equal(fast.q[-1], plain.q[-1])
     assert np.max(np.abs(fast.q[-1] - plain.q[-1]) / np.abs(plain.q[-1]).clip(1.0)) < 1e-11
     with pytest.raises(ValueError, match="tolerances must be"):
-        integrators.integrate(sy, q0, "GLRK4", "symmetric", h=10.0, steps=2, tolerances={"refresh": 0.1})
+        integrators.integrate(sy, q0, tableau="GLRK4", projection="symmetric",
+                              h=10.0, steps=2, tolerances={"refresh": 0.1})
+
+
+def test_every_argument_after_the_points_is_named():
+    """integrate(system, q0, *, …): a call that passes the tableau by position is refused rather
+    than read as something else."""
+    import inspect
+    params = list(inspect.signature(integrators.integrate).parameters.values())
+    assert [p.name for p in params[:2]] == ["system", "q0"]
+    assert all(p.kind is inspect.Parameter.KEYWORD_ONLY for p in params[2:]) and len(params) > 10
+    lv = integrators.system("lotka_volterra_2d")
+    with pytest.raises(TypeError):
+        integrators.integrate(lv, [1.0, 1.0], "GLRK2", "none", h=0.1, steps=1)

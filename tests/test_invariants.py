@@ -299,14 +299,14 @@ def test_invariants_along_a_solution_keep_the_sets_shape():
     symmetric projection keeps the noncanonical I₂ to round-off on guiding_centre_symmetric."""
     gc = integrators.system("guiding_centre_symmetric")
     S = invariants.surface("guiding_centre", 20, 20)           # (the default scene's surface: resolved)
-    sol = integrators.integrate(gc, S, "GLRK2", "symmetric", h=10.0, steps=30, save_every=10)
+    sol = integrators.integrate(gc, S, tableau="GLRK2", projection="symmetric", h=10.0, steps=30, save_every=10)
     assert sol.q.shape == (4, 20, 20, 4) and sol.breakdown_time.shape == (20, 20)
     series = invariants.along(sol, "noncanonical", system=gc)
     assert series.t.tolist() == [0.0, 100.0, 200.0, 300.0]
     assert series.value[2] == invariants.second_invariant(sol.q[2], "noncanonical", system=gc).value
     assert np.max(series.relative_error) < 1e-12 and not series.under_resolved.any()
     loop = invariants.loop("guiding_centre", 64)
-    sol1 = integrators.integrate(gc, loop, "GLRK1", "none", h=10.0, steps=20, save_every=10)
+    sol1 = integrators.integrate(gc, loop, tableau="GLRK1", projection="none", h=10.0, steps=20, save_every=10)
     s1 = invariants.along(sol1, "canonical")
     assert s1.value.shape == (3,) and np.max(s1.relative_error) < 1e-12
 

@@ -48,15 +48,15 @@ def test_a_toy_post_projection_runs_through_the_table_and_one_function(with_iden
     local error, where the standard projection (the same row with the paper's post term) puts it on."""
     sy, q0 = _vortices(n)
     h, steps = 0.1, 12
-    toy = integrators.integrate(sy, q0, "GLRK2", "identity", h=h, steps=steps)
+    toy = integrators.integrate(sy, q0, tableau="GLRK2", projection="identity", h=h, steps=steps)
     assert toy.projection == "identity" and np.all(toy.steps_taken == steps)
     assert np.array_equal(toy.lam, np.zeros_like(toy.lam))
     for i in range(steps):
-        one = integrators.integrate(sy, toy.q[i], "GLRK2", "none", h=h, steps=1)
+        one = integrators.integrate(sy, toy.q[i], tableau="GLRK2", projection="none", h=h, steps=1)
         assert np.max(np.abs(one.q[1] - toy.q[i + 1])) < 1e-12
         assert np.max(np.abs(one.p[1] - toy.p[i + 1])) < 1e-12
     off = np.max(np.abs(toy.p[1:] - sy.theta(toy.q[1:])))
-    std = integrators.integrate(sy, q0, "GLRK2", "standard", h=h, steps=steps)
+    std = integrators.integrate(sy, q0, tableau="GLRK2", projection="standard", h=h, steps=steps)
     assert off > 1e-9 and np.max(np.abs(std.p[1:] - sy.theta(std.q[1:]))) < 1e-12, off
 
 
@@ -65,8 +65,8 @@ def test_a_record_is_taken_in_place_of_a_name():
     out is the built-in standard projection, bit for bit."""
     sy, q0 = _vortices(3)
     mine = Projection("my standard", "none", "start", True, "end", "one", ())
-    a = integrators.integrate(sy, q0, "GLRK3", mine, h=0.1, steps=5)
-    b = integrators.integrate(sy, q0, "GLRK3", "standard", h=0.1, steps=5)
+    a = integrators.integrate(sy, q0, tableau="GLRK3", projection=mine, h=0.1, steps=5)
+    b = integrators.integrate(sy, q0, tableau="GLRK3", projection="standard", h=0.1, steps=5)
     assert a.projection == "my standard"
     assert np.array_equal(a.q, b.q) and np.array_equal(a.p, b.p) and np.array_equal(a.lam, b.lam)
 

@@ -32,7 +32,7 @@ def breakdown_step(sol):
 
 def test_lobatto_IIIA_IIIB_breaks_down_within_tens_of_steps(lv):
     # paper: "the simulation crashes after about 25 time steps" (two stages, h = 0.1)
-    sol = integrate(lv, [1.0, 1.0], "LobIIIA2", "none", h=0.1, steps=200)
+    sol = integrate(lv, [1.0, 1.0], tableau="LobIIIA2", projection="none", h=0.1, steps=200)
     assert 10 <= breakdown_step(sol) <= 100
 
 
@@ -40,14 +40,14 @@ def test_lobatto_IIIA_IIIB_breaks_down_within_tens_of_steps(lv):
 def test_lobatto_at_smaller_step_runs_longer_then_breaks_down(lv, tab, paper):
     # paper: at h = 0.01 "the integrator with two stages crashes after about 350 time steps
     # and the integrator with three stages after about 1.000"; we ask for the same order of magnitude
-    sol = integrate(lv, [1.0, 1.0], tab, "none", h=0.01, steps=3 * paper, save_every=3 * paper)
+    sol = integrate(lv, [1.0, 1.0], tableau=tab, projection="none", h=0.01, steps=3 * paper, save_every=3 * paper)
     assert paper / 3 <= breakdown_step(sol) <= 3 * paper
 
 
 def test_glrk1_unprojected_energy_error_bounded(lv):
     # paper: odd-stage Gauss–Legendre methods are stable without projection; the energy error
     # oscillates without growing
-    sol = integrate(lv, [1.0, 1.0], "GLRK1", "none", h=0.1, steps=4000, save_every=10)
+    sol = integrate(lv, [1.0, 1.0], tableau="GLRK1", projection="none", h=0.1, steps=4000, save_every=10)
     assert math.isinf(sol.breakdown_time[0])
     H = lv.H(sol.q[:, 0])
     err = np.abs(H - H[0])
@@ -58,7 +58,7 @@ def test_glrk1_unprojected_energy_error_bounded(lv):
 
 def test_radau_keeps_constraint_energy_drifts(lv):
     # paper: Radau methods preserve the Dirac constraint exactly but dissipate energy
-    sol = integrate(lv, [1.0, 1.0], "RadIIA2", "none", h=0.1, steps=2000, save_every=100)
+    sol = integrate(lv, [1.0, 1.0], tableau="RadIIA2", projection="none", h=0.1, steps=2000, save_every=100)
     q, p = sol.q[:, 0], sol.p[:, 0]
     assert np.abs(p - lv.theta(q)).max() <= 1e-14
     H = lv.H(q)
@@ -86,7 +86,7 @@ def test_glrk2_unprojected_breaks_down_near_step_74000_whatever_the_last_bits(lv
     q = np.array([[1.0, 1.0]])
     p = lv.theta(q)
     p_moved = np.array([[np.nextafter(p[0, 0], 2.0), np.nextafter(np.nextafter(p[0, 1], 0.0), 0.0)]])
-    sol = integrate(lv, np.repeat(q, 2, 0), "GLRK2", "none", h=0.1, steps=80000, save_every=80000,
+    sol = integrate(lv, np.repeat(q, 2, 0), tableau="GLRK2", projection="none", h=0.1, steps=80000, save_every=80000,
                     p0=np.concatenate([p, p_moved]))
     steps = sol.steps_taken + 1
     assert np.all(np.isfinite(sol.breakdown_time))
@@ -100,7 +100,8 @@ def test_srk3_standard_energy_order_is_three_asymptotically():
     q0 = np.array([1.0, 0.1, 1.0, -0.1])
 
     def errors(h):
-        q = integrate(sy, q0, "SRK3", "standard", h=h, steps=int(round(2.0 / h)), save_every=1).q[:, 0]
+        q = integrate(sy, q0, tableau="SRK3", projection="standard",
+                      h=h, steps=int(round(2.0 / h)), save_every=1).q[:, 0]
         return np.max(np.abs(sy.H(q) - sy.H(q[0]))), np.max(np.abs(sy.momentum(q) - sy.momentum(q[0])))
 
     (e16, _), (e32, _) = errors(1 / 16), errors(1 / 32)

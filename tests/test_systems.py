@@ -121,7 +121,8 @@ def test_massless_charged_particle_keeps_its_energy_over_long_times():
     and does not drift (measured, by tenths of the run: 3.1e-7, 2.7e-8, 3.0e-7, …, 4.8e-8); without
     projection the same run breaks down at t = 977.6 after its energy error reached 2."""
     sy = integrators.system("massless_charged_particle")
-    sol = integrators.integrate(sy, sy.defaults["q0"], "GLRK2", "symmetric", steps=40000, save_every=100)
+    sol = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="symmetric",
+                                steps=40000, save_every=100)
     assert np.isinf(sol.breakdown_time).all()
     H = sy.H(sol.q[:, 0])
     err = np.abs(H - H[0]) / abs(H[0])
@@ -135,11 +136,12 @@ def test_lotka_volterra_4d_energy_with_the_symmetric_projection():
     tenth of 40,000 steps, 1.3e-4 over the last; unprojected GLRK2 breaks down at t = 5.7.  Checked
     over 4,000 steps: below 2e-5, completed, and the unprojected run breaks down before t = 10."""
     sy = integrators.system("lotka_volterra_4d")
-    sol = integrators.integrate(sy, sy.defaults["q0"], "GLRK2", "symmetric", steps=4000, save_every=100)
+    sol = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="symmetric",
+                                steps=4000, save_every=100)
     assert np.isinf(sol.breakdown_time).all()
     H = sy.H(sol.q[:, 0])
     assert np.max(np.abs(H - H[0]) / abs(H[0])) < 2e-5
-    bare = integrators.integrate(sy, sy.defaults["q0"], "GLRK2", "none", steps=100)
+    bare = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="none", steps=100)
     assert bare.breakdown_time[0] < 10.0
 
 
@@ -171,7 +173,8 @@ def test_solovev_guiding_centre_conservation():
     sy = integrators.system("guiding_centre_solovev")
 
     def errors(projection):
-        sol = integrators.integrate(sy, sy.defaults["q0"], "GLRK2", projection, steps=40000, save_every=100)
+        sol = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection=projection,
+                                    steps=40000, save_every=100)
         assert np.isinf(sol.breakdown_time).all()
         Q = sol.q[:, 0]
         eH = np.abs(sy.H(Q) / sy.H(Q[0]) - 1)
@@ -207,7 +210,8 @@ def test_full_orbit_conservation():
     but 100× larger (1.0e-4) and the momentum moves by 7.1e-5."""
     sy = integrators.system("charged_particle_tokamak")
     for projection, bound_H, bound_P in [("symmetric", 1.2e-6, 1e-12), ("none", 1.5e-4, 1e-4)]:
-        sol = integrators.integrate(sy, sy.defaults["q0"], "GLRK2", projection, steps=40000, save_every=100)
+        sol = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection=projection,
+                                    steps=40000, save_every=100)
         assert np.isinf(sol.breakdown_time).all()
         Q = sol.q[:, 0]
         eH = np.abs(sy.H(Q) / sy.H(Q[0]) - 1)
@@ -248,7 +252,7 @@ def test_sparse_second_derivatives_are_zeroed_by_a_loop_not_entry_by_entry():
     assert "for _i in range(4096):" in src and src.count("st(_TT,") < 40
     rng = np.random.default_rng(1)
     q = np.concatenate([rng.uniform(0, 2 * np.pi, k), rng.standard_normal(k)])[None]
-    sol = integrators.integrate(ring, q, "GLRK2", "none", h=0.1, steps=5)
+    sol = integrators.integrate(ring, q, tableau="GLRK2", projection="none", h=0.1, steps=5)
     assert np.isinf(sol.breakdown_time).all() and sol.mean_newton_iterations <= 8   # a wrong Jacobian: more
     from integrators import reference
     st = reference.Stepper(ring, integrators.tableau("GLRK2"), "none", 0.1)

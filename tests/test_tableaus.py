@@ -134,8 +134,8 @@ def test_rounded_drops_only_the_corrections():
     assert not (r.a_lo.any() or r.abar_lo.any() or r.b_lo.any()) and tab.a_lo.any()
     assert r.digest != tab.digest
     sy = integrators.system("lotka_volterra_2d")
-    q1 = integrators.integrate(sy, [1.0, 1.0], tab, "symmetric", h=0.1, steps=100).q[-1]
-    q2 = integrators.integrate(sy, [1.0, 1.0], r, "symmetric", h=0.1, steps=100).q[-1]
+    q1 = integrators.integrate(sy, [1.0, 1.0], tableau=tab, projection="symmetric", h=0.1, steps=100).q[-1]
+    q2 = integrators.integrate(sy, [1.0, 1.0], tableau=r, projection="symmetric", h=0.1, steps=100).q[-1]
     assert 0 < np.max(np.abs(q1 - q2)) < 1e-13
 
 

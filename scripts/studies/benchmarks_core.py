@@ -93,7 +93,8 @@ def main():
     h = 10.0
     q = points(args.points, rng)
     cores = get_threads()
-    integrators.integrate(gc, q[:2], "GLRK2", "symmetric", h=h, steps=2)    # compile outside the timings
+    integrators.integrate(gc, q[:2], tableau="GLRK2", projection="symmetric",
+                          h=h, steps=2)    # compile outside the timings
 
     rows = []
     for tab in args.tableaus:

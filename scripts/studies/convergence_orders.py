@@ -205,7 +205,8 @@ def double_double():
             errs = {"solution": [], "energy": [], "momentum": []}
             for h in HS:
                 n = round(T / h)
-                sol = integrators.integrate(sy, q0, tab, proj, h=h, steps=n, save_every=1, precision="double-double")
+                sol = integrators.integrate(sy, q0, tableau=tab, projection=proj,
+                                            h=h, steps=n, save_every=1, precision="double-double")
                 ok = not np.isfinite(sol.breakdown_time[0])
                 q2 = np.stack([sol.q[:, 0], sol.q_lo[:, 0]], axis=-1)
                 sc = scalars_dd(sy, q2)

@@ -21,7 +21,8 @@ def main():
     print("|---|---|---|---|---|")
     for k in range(1, 14):
         h = 2.0 ** -k
-        sol = integrators.integrate(sy, q0, "SRK3", "standard", h=h, steps=int(round(T / h)), save_every=1)
+        sol = integrators.integrate(sy, q0, tableau="SRK3", projection="standard",
+                                    h=h, steps=int(round(T / h)), save_every=1)
         q = sol.q[:, 0]
         hs.append(h)
         eH.append(float(np.max(np.abs(sy.H(q) - sy.H(q[0])))))

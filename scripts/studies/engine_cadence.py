@@ -49,7 +49,8 @@ def builtin_rows(steps=40, cadences=(1, 8, 40)) -> list:
     rows = []
     for name, tab, proj in BUILTIN:
         sc = load_scene(name)
-        sols = [integrators.integrate(sc.system(), sc.loop_points(), tab, proj, h=sc.h, steps=steps, save_every=k)
+        sols = [integrators.integrate(sc.system(), sc.loop_points(), tableau=tab, projection=proj,
+                                      h=sc.h, steps=steps, save_every=k)
                 for k in cadences]
         last = [dict(q=s.q[-1], p=s.p[-1], lam=s.lam[-1], newton_iterations=s.newton_iterations,
                      breakdown_time=s.breakdown_time) for s in sols]
@@ -90,7 +91,7 @@ def step_rows(path: Path, folder: Path, h=140.0, steps=50) -> list:
     sols = []
     for k in (1, 10):
         t0 = time.perf_counter()
-        sol = integrators.integrate(sy, q0, "GLRK2", "none", h=h, steps=steps, save_every=k)
+        sol = integrators.integrate(sy, q0, tableau="GLRK2", projection="none", h=h, steps=steps, save_every=k)
         sols.append(sol)
         rows.append(dict(path="integrate", cadence=k, points=len(q0), h=h, steps=steps,
                          breakdowns=broken(sol.breakdown_time), iterations=int(sol.newton_iterations.sum()),

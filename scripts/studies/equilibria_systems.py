@@ -57,15 +57,15 @@ def orbit(ns=(33, 65, 129)):
     sol = integrators.system("guiding_centre_solovev")
     q0 = np.array([sol.defaults["q0"]])
     kw = dict(h=2.5, steps=10_000, save_every=50)
-    ref = integrators.integrate(sol, q0, "GLRK2", "symmetric", **kw)
-    nudged = integrators.integrate(sol, q0 * (1 + np.finfo(float).eps), "GLRK2", "symmetric", **kw)
+    ref = integrators.integrate(sol, q0, tableau="GLRK2", projection="symmetric", **kw)
+    nudged = integrators.integrate(sol, q0 * (1 + np.finfo(float).eps), tableau="GLRK2", projection="symmetric", **kw)
     floor = float(np.max(np.abs(nudged.q[..., [0, 1, 3]] - ref.q[..., [0, 1, 3]])))
     folder = Path(tempfile.mkdtemp())
     out = {"floor": floor, "rows": []}
     path = ref.q.reshape(-1, 4)
     for n in ns:
         sy = system_from_geqdsk(write_solovev(folder / f"s{n}.geqdsk", n), mu=0.01)
-        got = integrators.integrate(sy, q0, "GLRK2", "symmetric", **kw)
+        got = integrators.integrate(sy, q0, tableau="GLRK2", projection="symmetric", **kw)
         dev = float(np.max(np.abs(got.q[..., [0, 1, 3]] - ref.q[..., [0, 1, 3]])))
         field = float(max(np.max(np.abs(sy.theta(path) - sol.theta(path))), np.max(np.abs(sy.dH(path) - sol.dH(path)))))
         out["rows"].append(dict(n=n, deviation=dev, field_error=field))
@@ -112,7 +112,7 @@ def orbits_figure(path):
     v = sy.defaults["speed"]
     c = np.array([1.4505169, 0.0379210, 0.0, 0.0])
     starts = np.array([c + [0, 0, 0, v / np.sqrt(2)], c + [0, 0, 0, 0.15 * v], c + [0.1, 0, 0, 0.1 * v]])
-    res = integrators.integrate(sy, starts, "GLRK2", "symmetric", h=120.0, steps=4000, save_every=2)
+    res = integrators.integrate(sy, starts, tableau="GLRK2", projection="symmetric", h=120.0, steps=4000, save_every=2)
     fig, ax = plt.subplots(figsize=(4.6, 6.2))
     ax.contour(eq.R, eq.Z, eq.psi.T / eq.psi_span, np.linspace(0.1, 0.9, 9), colors="0.8", linewidths=0.6)
     ax.contour(eq.R, eq.Z, eq.psi.T / eq.psi_span, [1.0], colors="0.3", linewidths=1.0)

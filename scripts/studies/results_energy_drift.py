@@ -56,7 +56,7 @@ def double_run(tab, steps, every):
     """The compiled engine in double: the states every ``every`` steps, wall time, broke down."""
     sy = integrators.system("guiding_centre_tokamak")
     t0 = time.perf_counter()
-    sol = integrate(sy, np.array(Q0), tab, "symmetric", h=H_STEP, steps=steps, save_every=every)
+    sol = integrate(sy, np.array(Q0), tableau=tab, projection="symmetric", h=H_STEP, steps=steps, save_every=every)
     return sol.q[:, 0], time.perf_counter() - t0, bool(np.isfinite(sol.breakdown_time[0]))
 
 
@@ -158,7 +158,8 @@ def double_double(args):
     sy = integrators.system("guiding_centre_tokamak")
     for name, tab, every, out, (qd, wall_d, broke_d) in beside_double(args):
         t0 = time.perf_counter()
-        sol = integrate(sy, np.array(Q0), tab, "symmetric", h=H_STEP, steps=args.steps, save_every=every,
+        sol = integrate(sy, np.array(Q0), tableau=tab, projection="symmetric",
+                        h=H_STEP, steps=args.steps, save_every=every,
                         precision="double-double")
         wall_x = time.perf_counter() - t0
         q2 = np.stack([sol.q[:, 0], sol.q_lo[:, 0]], axis=-1)

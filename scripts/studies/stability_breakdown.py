@@ -50,7 +50,7 @@ def ulps(x, k):
 
 
 def breakdown_steps(system, q0, p0, tab, h, steps):
-    sol = integrate(system, q0, tab, "none", h=h, steps=steps, save_every=steps, p0=p0)
+    sol = integrate(system, q0, tableau=tab, projection="none", h=h, steps=steps, save_every=steps, p0=p0)
     return [int(n) + 1 if np.isfinite(t) else None for n, t in zip(sol.steps_taken, sol.breakdown_time)]
 
 

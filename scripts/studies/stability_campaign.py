@@ -97,7 +97,7 @@ def run_one(case, tab, proj, steps):
             print(f"    {case} {tab}-{proj}: {ticks[0] * 10} %", file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
-    sol = integrate(system, q0, tab, proj, h=h, steps=steps, save_every=every, progress=progress)
+    sol = integrate(system, q0, tableau=tab, projection=proj, h=h, steps=steps, save_every=every, progress=progress)
     wall = time.perf_counter() - t0
     taken = int(sol.steps_taken[0])
     broke = math.isfinite(sol.breakdown_time[0])

@@ -25,7 +25,7 @@ def lv_breakdown(args):
     for name in args.pairs:
         for prec in ("double", "double-double"):
             t0 = time.perf_counter()
-            sol = integrators.integrate(sy, [1.0, 1.0], name, "none", h=0.1, steps=args.steps,
+            sol = integrators.integrate(sy, [1.0, 1.0], tableau=name, projection="none", h=0.1, steps=args.steps,
                                         save_every=args.every, precision=prec)
             wall = time.perf_counter() - t0
             q = sol.q[:, 0] if sol.q_lo is None else sol.q[:, 0] + sol.q_lo[:, 0]

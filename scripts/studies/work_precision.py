@@ -113,7 +113,8 @@ def trajectory(args):
             for k in range(3):
                 h = h0 / 2 ** k
                 t0 = time.perf_counter()
-                sol = integrate(system, q0, tab, proj, h=h, steps=T_STEPS * 2 ** k, save_every=T_STEPS * 2 ** k)
+                sol = integrate(system, q0, tableau=tab, projection=proj,
+                                h=h, steps=T_STEPS * 2 ** k, save_every=T_STEPS * 2 ** k)
                 wall = time.perf_counter() - t0
                 broke = int(np.isfinite(sol.breakdown_time).sum())
                 err = None if broke else error(sol.q[-1], ref)
@@ -172,7 +173,7 @@ def invariants(args):
         for h in args.h:
             steps = int(round(T / h))
             t0 = time.perf_counter()
-            sol = integrate(system, q0, tab, proj, h=h, steps=steps, save_every=steps)
+            sol = integrate(system, q0, tableau=tab, projection=proj, h=h, steps=steps, save_every=steps)
             wall = time.perf_counter() - t0
             broke = int(np.isfinite(sol.breakdown_time).sum())
             e1, e2, under = invariant_errors(system, *split(sol.q[-1]), I1_0, I2_0)
