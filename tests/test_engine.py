@@ -134,7 +134,7 @@ def test_the_generated_code_is_cached_on_disk_keyed_by_the_expressions(tmp_path)
     env = dict(os.environ, POINCARE_CACHE=str(tmp_path))
     code = ("import integrators, sympy; x, y = sympy.symbols('x y'); "
             "s = integrators.system_from([-y / 2, x / 2], {H}, [x, y]); "
-            "print(integrators.integrate(s, [1.0, 0.5], 'GLRK2', 'symmetric', h=0.1, steps=3).q[-1, 0, 0])")
+            "print(integrators.integrate(s, [1.0, 0.5], tableau='GLRK2', projection='symmetric', h=0.1, steps=3).q[-1, 0, 0])")
     outs = [subprocess.run([sys.executable, "-c", code.format(H=H)], env=env, capture_output=True, text=True,
                            check=True).stdout for H in ("(x**2 + y**2) / 2", "(x**2 + y**2) / 2", "x**2 + y**2")]
     files = sorted(p.name for p in (tmp_path / "kernels").glob("system_*.py"))

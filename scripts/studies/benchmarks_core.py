@@ -72,7 +72,7 @@ def startup(tmp):
     env = dict(os.environ, POINCARE_CACHE=str(Path(tmp) / "poincare"), NUMBA_CACHE_DIR=str(Path(tmp) / "numba"))
     code = ("import time; t = time.perf_counter(); import integrators; "
             "s = integrators.system('point_vortices'); "
-            "integrators.integrate(s, s.defaults['q0'], 'GLRK2', 'symmetric', steps=10); "
+            "integrators.integrate(s, s.defaults['q0'], tableau='GLRK2', projection='symmetric', steps=10); "
             "print(time.perf_counter() - t)")
     out = []
     for _ in range(2):
