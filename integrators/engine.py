@@ -46,7 +46,7 @@ class LaneUse(NamedTuple):
     iterations: int
 
 CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
-                     "iterations", "steps", "have_lu", "jac_z", "jac_q", "jac_lam")
+                     "iterations", "steps", "have_lu", "jac_z", "jac_q", "jac_lam", "defects", "orders")
 
 
 def set_threads(n: int | None):
@@ -154,6 +154,9 @@ class State:
         self.jac_z = np.zeros((n, s + 2, d), dt)
         self.jac_q = np.zeros((n, d), dt)
         self.jac_lam = np.zeros((n, d), dt)
+        from .kernel import DEPTH
+        self.defects = np.zeros((n, DEPTH * (s + 2), d), dt)
+        self.orders = np.zeros((n, 4), dtype=np.uint8)
         self.needs_factors = False      # have_lu read from a checkpoint: lu, piv to be rebuilt
 
     @classmethod
@@ -210,6 +213,7 @@ class State:
             setattr(st, name, np.zeros_like(q2))
         st.Y = np.zeros(st.Y.shape + (2,))
         st.jac_z = np.zeros(st.jac_z.shape + (2,))
+        st.defects = np.zeros(st.defects.shape + (2,))
         st.lu = np.empty(st.lu.shape + (2,))
         return st
 
@@ -226,7 +230,7 @@ class State:
         u8 = lambda x: x.view(np.uint8)
         return (self.q, self.p, self.Lam, self.q_comp, self.p_comp, self.Y, self.mu, u8(self.have_history),
                 u8(self.live), self.breakdown_time, self.iterations, self.steps, self.lu, self.piv, u8(self.have_lu),
-                self.jac_z, self.jac_q, self.jac_lam)
+                self.jac_z, self.jac_q, self.jac_lam, self.defects, self.orders)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,14 +242,23 @@ class Tolerances:
     stall_complex : the same for the audit's complex-step derivatives (default 1e-13)
     maxiter : iterations before a step counts as failed (default 40)
     refresh : a fresh Jacobian after an iteration that contracted by less than this (default 0.01)
-    predictor : the next step's stage guess: ``"extrapolate"`` (default) the Lagrange polynomial
-        through the last step's stage values, ``"velocity"`` that polynomial with h·q̇(q_n) as one
-        more node (one evaluation and a d × d solve a step; :func:`predictor`)
+    predictor : the next step's guess of its stages, Λ and μ: ``"defects"`` (default) the Lagrange
+        polynomial through the last step's stage values, corrected by the extrapolated errors of
+        that polynomial on the last ``depth`` steps, Λ and μ extrapolated the same way
+        (:func:`integrators.kernel._guess`); ``"extrapolate"`` the polynomial alone, Λ_n and μ_n as
+        they are (the engine's predictor until the defects were added); ``"velocity"`` that
+        polynomial with h·q̇(q_n) as one more node (one evaluation and a d × d solve a step;
+        :func:`predictor`)
+    depth : how many steps' defects ``"defects"`` keeps, 1 … kernel.DEPTH (default 8); each step
+        uses the order that would have done best on the step before
+    trust : a step whose last guess was off by at most this (relative to max(|q|, 1)) starts its
+        Newton from a Jacobian at the guess; the others from the factors carried from the last step
+        (default 1e-3; ``"defects"`` only: the other predictors always carry them)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
 
-    The defaults are the engine's since it was written: the same bits as before they were data.
+    ``Tolerances(predictor="extrapolate")`` is the engine's rule before issue 55, bitwise.
     """
 
     tol: float = 4 * np.finfo(np.float64).eps
@@ -254,12 +267,18 @@ class Tolerances:
     maxiter: int = 40
     refresh: float = 0.01
     accept_unconverged: bool = False
-    predictor: str = "extrapolate"
+    predictor: str = "defects"
+    depth: int = 8
+    trust: float = 1e-3
 
     def __post_init__(self):
+        from .kernel import DEPTH
         if self.predictor not in PREDICTORS:
             raise ValueError(f"Tolerances.predictor must be one of {', '.join(PREDICTORS)}, got {self.predictor!r}")
-        for name in ("tol", "stall", "stall_complex", "refresh"):
+        if isinstance(self.depth, bool) or not isinstance(self.depth, (int, np.integer)) or \
+                not 1 <= self.depth <= DEPTH:
+            raise ValueError(f"Tolerances.depth must be an integer from 1 to {DEPTH}, got {self.depth!r}")
+        for name in ("tol", "stall", "stall_complex", "refresh", "trust"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"Tolerances.{name} must be a finite number ≥ 0, got {v!r}")
@@ -276,7 +295,9 @@ class Tolerances:
         values = dict(tol=self.tol * scale, stall=self.stall * scale, stall_complex=self.stall_complex,
                       maxiter=float(self.maxiter), refresh=self.refresh,
                       accept=1.0 if self.accept_unconverged else 0.0,
-                      velocity=1.0 if self.predictor == "velocity" else 0.0)
+                      velocity=1.0 if self.predictor == "velocity" else 0.0,
+                      depth=float(self.depth) if self.predictor == "defects" else 0.0,
+                      trust=self.trust if self.predictor == "defects" else -1.0)
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 
@@ -517,7 +538,7 @@ class Specialisation(NamedTuple):
     proto: tuple
 
 
-PREDICTORS = ("extrapolate", "velocity")
+PREDICTORS = ("defects", "extrapolate", "velocity")
 PRECISIONS = ("double", "double-double")
 
 
@@ -525,14 +546,15 @@ def predictor(c, kind="extrapolate"):
     """The stage guess E (s × (s + 1)) of the next step: Y_i ≈ Σ_j E_ij Y_j + E_is h·q̇(q_n), Y_j the
     last step's stage displacements (h times the stage velocities, at nodes c_j − 1).
 
-    ``"extrapolate"``: the Lagrange polynomial through the Y_j, evaluated at c_i (last column zero).
+    ``"extrapolate"`` (and ``"defects"``, which corrects it in the kernel): the Lagrange polynomial
+    through the Y_j, evaluated at c_i (last column zero).
     ``"velocity"``: the same with h·q̇(q_n) at node 0 (one degree more); a stage at c_j = 1 sits on
     that node and is left out.
     """
     c = np.asarray(c, dtype=np.float64)
     s = c.size
     E = np.zeros((s, s + 1))
-    if kind == "extrapolate":
+    if kind in ("extrapolate", "defects"):
         E[:, :s] = _lagrange_matrix(c - 1.0, c)
     elif kind == "velocity":
         keep = np.flatnonzero(np.abs(c - 1.0) > 1e-12)

@@ -32,6 +32,7 @@ from a checkpoint, or split into calls anywhere, is bitwise the run in one call.
 """
 from __future__ import annotations
 
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -59,6 +60,11 @@ WIDE_NZ = 12            # lanes, whose independent chains hide each other's late
 #                         solve (GLRK1 and GLRK2 with any projection, SRK3 unprojected at d = 4);
 #                         above 12 unknowns 16 lanes' scratch outgrows the L1 cache and lose
 #                         (docs/benchmarks-history.md, "Sixteen lanes for small Newton systems").
+DEPTH = 8               # the stage predictor's memory: the defects of the last DEPTH steps' guesses
+#                         (:func:`_guess`; how many a pair uses is Newton.depth, run-time data)
+BETA = tuple(tuple(float((-1) ** j * math.comb(m, j + 1)) if j < m else 0.0 for j in range(DEPTH))
+             for m in range(1, DEPTH + 1))
+#                         BETA[m - 1]: the polynomial of degree m − 1 through m values, one step on
 WIDE_POINTS = 1024      # ... and only for calls of at least this many points: a second width is a
 #                         second compilation of the kernel (~35 s a dimension), paid where a run is
 #                         long enough to gain it back, not by every small scene and test.
@@ -141,9 +147,12 @@ Scratch = namedtuple("Scratch", [
     "pth", "pT", "pTT", "pdH", "pHH",
     # d-vectors
     "qbar", "pbar", "q0", "pb", "sY", "sG", "q1", "p1", "mid", "tl", "qh", "ph", "vf", "inc", "qn", "qcn", "pn",
-    "pcn", "ln", "sYs", "mug", "qr",
+    "pcn", "ln", "sYs", "qr",
     # Newton: unknowns, evaluated iterate, residual, fresh Jacobian, projection's Newton, guesses
     "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess",
+    # the predictor: this step's base guess (stages, Λ, μ) and the last steps' defects from theirs
+    # (the guess itself, ``guess``, has the same layout: s·d stages, then Λ, then μ)
+    "base", "D",
     # the points' own state while the group is advanced; jz, jq, jl: where its factors lu were taken
     "q", "p", "lam", "qc", "pc", "Y", "mu", "lu", "jz", "jq", "jl",
     "size"])
@@ -154,6 +163,9 @@ Flags = namedtuple("Flags", [
     "done", "ok", "stale", "prev", "its", "norm", "nan", "finite",   # Newton's per-lane bookkeeping
     "have", "hist", "live", "active", "okstep", "tbrk", "itn", "stp",   # the points' step flags
     "jn",                         # the steps a lane's point has taken in this call
+    "depth",                      # the predictor's defects the lane's point holds (0 … DEPTH)
+    "ordy", "ordl",               # the order of the defects' extrapolation: stages, multipliers
+    "trust",                      # the last guess was good: a Jacobian at the guess, not carried
     "held",                       # whether the lane holds a point (IntScratch.pt)
     "retry",                      # the lane's step failed once: its next _step is the second try
     "gits",                       # (lane 0) the Newton iterations the group has run
@@ -185,23 +197,27 @@ def layout(s, d, nz):
         Q=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
         pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
         **dict.fromkeys(D_VECTORS, d),
-        z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd,
+        z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd + 2 * d,
+        base=sd + 2 * d, D=DEPTH * (sd + 2 * d),
         q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz, jz=nz, jq=d, jl=d))
-    F = _offsets(Flags, dict(scale=nz, pscale=d, **dict.fromkeys(Flags._fields[2:-1], 1)))
+    F = _offsets(Flags, dict(dict.fromkeys(Flags._fields[:-1], 1), scale=nz, pscale=d))
     IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d, pt=1))
     return S, F, IP
 
 
-Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh accept velocity")
+Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh accept velocity depth trust")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
 ``maxiter`` iterations; a fresh Jacobian after an iteration that contracted by less than
 ``refresh``; ``accept`` (≠ 0) takes a finite unconverged iterate after maxiter; ``velocity`` (≠ 0)
-adds h·q̇(q_n) to the stage predictor."""
+adds h·q̇(q_n) to the stage predictor; ``depth`` (0 … DEPTH) how many of the last steps' defects
+correct the guess (:func:`_guess`); a step whose last guess was off by at most ``trust`` (relative)
+starts its Newton from a Jacobian at the guess instead of the factors carried from the last step
+(negative: never)."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
-                                        "lu piv have_lu jac_z jac_q jac_lam")
+                                        "lu piv have_lu jac_z jac_q jac_lam defects orders")
 StateArrays.__doc__ = """The per-point arrays of integrators.engine.State as the kernel takes them (State._tuple:
 a plain tuple in this order, the boolean flags viewed as uint8; value arrays with a last axis of 2
 in double-double)."""
@@ -235,7 +251,7 @@ def _records(lay):
 
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6])
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8])
 
 
 @njit(inline='always', **_OPTS)
@@ -832,10 +848,10 @@ def _scale(x):
 
 
 @njit(**_OPTS)
-def _attempt(known, guess, mu0, ev, inside, P, d, s, nz, g):
-    """One step of the lanes ``f.active`` from the stage guess (and μ guess), starting from the kept
-    Newton factors in the lanes ``known``; commits the new state of each lane that succeeds.  Per
-    lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
+def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
+    """One step of the lanes ``f.active`` from the stage guess (and the guesses of Λ_{n+1} and μ),
+    starting from the kept Newton factors in the lanes ``known``; commits the new state of each lane
+    that succeeds.  Per lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
     w, S, f, F, ip, IP, plan = g.w, g.S, g.f, g.F, g.ip, g.IP, P.plan
     sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
@@ -852,7 +868,7 @@ def _attempt(known, guess, mu0, ev, inside, P, d, s, nz, g):
         for i in range(nz // d):
             st(f, F.scale + i * d + m, sc)
         if coupled:
-            st(z, iL + m, ld(lam, m))
+            st(z, iL + m, ld(lam0, m))
         if plan.lobatto:
             st(z, iM + m, ld(mu0, m))
             st(f, F.scale + iM + m, _scale(ld(pbar, m)))
@@ -873,7 +889,7 @@ def _attempt(known, guess, mu0, ev, inside, P, d, s, nz, g):
             st(sYs, m, ld(sY, m))
             st(qh, m, ld(qbar, m) + ld(sY, m))
             st(ph, m, ld(pbar, m) + ld(sG, m))
-            st(pz, m, ld(lam, m))
+            st(pz, m, ld(lam0, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
         _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, P,
                 d, s, g)
@@ -945,14 +961,111 @@ def _commit(inside, P, d, s, iM, g):
             st(Ys, i, sel(commit, ld(zev, i), ld(Ys, i)))
 
 
+@njit(inline='always', **_OPTS)
+def _base(ev, P, d, s, nl, fresh, g):
+    """The guess every predictor starts from, into ``base`` (s·d stages, then Λ (``nl`` = d where
+    the projection solves for it, else 0), then μ (Lobatto tableaus)): the
+    Lagrange polynomial through the last step's stage values (Y_j at nodes c_j − 1) at the new
+    nodes c_i, with h·q̇(q_n) as one more node under ``cfg.velocity``; Λ_n and μ_n as they are."""
+    w, S, cfg = g.w, g.S, P.cfg
+    c = _coefficients(P.tb, s)
+    Ys, v, base, lam, mu = at(w, S.Y), at(w, S.vf), at(w, S.base), at(w, S.lam), at(w, S.mu)
+    velocity = cfg.velocity != 0.0
+    if velocity:
+        _velocity(ev, P, at(w, S.q), v, mnot(fresh), d, g)
+    for i in range(s):
+        for m in range(d):
+            acc = c.E[i * (s + 1)] * ld(Ys, m)
+            for j in range(1, s):
+                acc = acc + c.E[i * (s + 1) + j] * ld(Ys, j * d + m)
+            if velocity:
+                acc = acc + c.E[i * (s + 1) + s] * ld(v, m)
+            st(base, i * d + m, acc)
+    for m in range(nl):
+        st(base, s * d + m, ld(lam, m))
+    if P.plan.lobatto:
+        for m in range(d):
+            st(base, s * d + nl + m, ld(mu, m))
+
+
+@njit(inline='always', **_OPTS)
+def _guess(ordy, ordl, depth, nb, sd, w, S):
+    """The guess (stages, Λ, μ): ``base`` plus the extrapolated error of the base.  The defects
+    δ = solution − base of the last steps are kept as a table of backward differences, T_k = ∇^k δ
+    (``D``, newest first); base + T_0 + … + T_{m−1} is the polynomial of degree m − 1 through the
+    last m defects, one step on (Newton's backward-difference form), with m per lane: ``ordy`` for
+    the stages, ``ordl`` for Λ and μ (0: the base itself).  A step's solution is a smooth function
+    of its q_n, and so is the base's error, which this polynomial follows."""
+    base, D, guess = at(w, S.base), at(w, S.D), at(w, S.guess)
+    for i in range(nb):
+        x = ld(base, i)
+        acc = x
+        order = ordy if i < sd else ordl
+        for k in range(depth):
+            acc = acc + ld(D, k * nb + i)
+            x = sel(order == float(k + 1), acc, x)
+        st(guess, i, x)
+
+
+@njit(inline='always', **_OPTS)
+def _remember(valid, depth, trust, nb, nl, s, d, g):
+    """After a step taken from a base (lanes ``valid``): the new defect δ = (Y, Λ, μ)_{n+1} − base
+    enters the difference table (T_0 = δ, T_k = T_{k−1} − T_{k−1}^old).  The new T_m is the error
+    the guess of order m would have made on this step, so each block (stages; Λ and μ) takes for
+    its next guess the order that did best here (among those its history allows), and the lane
+    trusts its next stage guess (a Jacobian taken there) when that order's error was at most
+    ``trust`` relative to max(|q|, 1)."""
+    w, S, f, F = g.w, g.S, g.f, g.F
+    base, D, Ys, lam, mu, q = at(w, S.base), at(w, S.D), at(w, S.Y), at(w, S.lam), at(w, S.mu), at(w, S.q)
+    cur, inv = at(w, S.guess), at(w, S.tl)       # (the guess is spent; tl is free after _prepare)
+    sd = s * d
+    held = ld(f, F.depth)
+    for m in range(d):
+        st(inv, m, 1.0 / _scale(re(ld(q, m))))
+    for i in range(nb):
+        new = ld(Ys, i) if i < sd else (ld(lam, i - sd) if i < sd + nl else ld(mu, i - sd - nl))
+        st(cur, i, new - ld(base, i))
+    zero = sel(valid, 0.0, 0.0)
+    besty, bestl, ordy, ordl = zero, zero, zero, zero
+    for k in range(depth + 1):
+        ey, el = zero, zero
+        for i in range(nb):
+            c = ld(cur, i)
+            a = abs(re(c)) * re(ld(inv, i % d))
+            if i < sd:
+                ey = sel(a > ey, a, ey)
+            else:
+                el = sel(a > el, a, el)
+            if k < depth:
+                old = ld(D, k * nb + i)
+                st(D, k * nb + i, sel(valid, c, old))
+                st(cur, i, c - old)
+        if k == 0:
+            besty, bestl = ey, el
+        else:
+            allowed = held >= float(k)
+            better = mand(allowed, ey < besty)
+            besty, ordy = sel(better, ey, besty), sel(better, float(k), ordy)
+            better = mand(allowed, el < bestl)
+            bestl, ordl = sel(better, el, bestl), sel(better, float(k), ordl)
+    st(f, F.ordy, sel(valid, ordy, ld(f, F.ordy)))
+    st(f, F.ordl, sel(valid, ordl, ld(f, F.ordl)))
+    st(f, F.trust, sel(valid, sel(besty <= trust, 1.0, 0.0), ld(f, F.trust)))
+    st(f, F.depth, sel(valid, sel(held < float(depth), held + 1.0, float(depth)), held))
+
+
 @njit(**_OPTS)
 def _step(t_next, ev, inside, P, d, s, nz, g):
     """Advance the live lanes by one step; returns the lanes whose step is over (taken, or broken down).
 
-    A step is tried from up to three starts before a lane breaks down: (0) the extrapolated stage
-    guess with the Newton factors carried from the last step; if that fails, (1) the same guess with
-    a Jacobian taken there (only when try 0 used carried factors); then (2) h·q̇(q_n) at every stage,
-    μ = 0, with a Jacobian taken there.  A first step starts at (2).  A lane whose last try fails
+    The guess (:func:`_guess`): the last step's stages extrapolated, corrected by the last steps'
+    defects (``cfg.depth`` of them).  With ``cfg.carry`` (the engine's rule before the predictor
+    learned from its defects) a step is tried from up to three starts before a lane breaks down:
+    (0) the guess with the Newton factors carried from the last step; if that fails, (1) the same
+    guess with a Jacobian taken there (only when try 0 used carried factors); then (2) h·q̇(q_n) at
+    every stage, μ = 0, with a Jacobian taken there.  Without it (the default): (0) the guess with a
+    Jacobian taken there; (1) the uncorrected base guess with the carried factors (a Jacobian there
+    when none are carried); (2) as above.  A first step starts at (2).  A lane whose last try fails
     (Newton does not converge, a value is not finite, q leaves the domain) is frozen at its last good
     state with its breakdown time set to ``t_next``.  Each further try is the lane's next call of this
     function (``F.retry``: the next try's number, its step not over), made beside its neighbours'
@@ -963,34 +1076,34 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
     fresh = ld(f, F.hist) == 0.0
     tries = ld(f, F.retry)
     last = tries == 2.0
-    c = _coefficients(P.tb, s)
-    Ys, guess, v = at(w, S.Y), at(w, S.guess), at(w, S.vf)
-    velocity = cfg.velocity != 0.0              # the predictor: with h·q̇(q_n) as a node at 0
-    if velocity:
-        _velocity(ev, P, at(w, S.q), v, mnot(fresh), d, g)
-    for i in range(s):                          # Lagrange extrapolation of the last step's stages
-        for m in range(d):
-            acc = c.E[i * (s + 1)] * ld(Ys, m)
-            for j in range(1, s):
-                acc = acc + c.E[i * (s + 1) + j] * ld(Ys, j * d + m)
-            if velocity:
-                acc = acc + c.E[i * (s + 1) + s] * ld(v, m)
-            st(guess, i * d + m, acc)
+    depth = int(cfg.depth)
+    plan = P.plan
+    nl = d if (plan.pre == PRE_UNKNOWN or plan.post) else 0     # Λ solved for: predicted too
+    sd = s * d
+    nb = sd + nl + (d if plan.lobatto else 0)
+    _base(ev, P, d, s, nl, fresh, g)
+    first_try = tries == 0.0
+    _guess(sel(first_try, ld(f, F.ordy), 0.0), sel(first_try, ld(f, F.ordl), 0.0), depth, nb, sd, w, S)
+    guess = at(w, S.guess)
     first = mand(live, mor(fresh, last))        # a first step, or the last try: from h·q̇(q_n)
     if anyl(first):
         _first_guess(ev, P, at(w, S.q), guess, first, d, s, g)
-    mu, mug = at(w, S.mu), at(w, S.mug)
-    for m in range(d):                          # μ's guess: the last step's, zero on the last try
-        st(mug, m, sel(last, 0.0, ld(mu, m)))
+    if plan.lobatto:                            # μ's guess: zero on the last try
+        for m in range(d):
+            st(guess, sd + nl + m, sel(last, 0.0, ld(guess, sd + nl + m)))
     st(f, F.active, sel(live, 1.0, 0.0))
-    known = mand(ld(f, F.have) != 0.0, tries == 0.0)   # carried factors: try 0 only
-    _attempt(known, guess, mug, ev, inside, P, d, s, nz, g)
+    have = ld(f, F.have) != 0.0
+    trusted = ld(f, F.trust) != 0.0             # carried factors: try 0 untrusted, try 1 trusted
+    known = mand(have, mor(mand(first_try, mnot(trusted)), mand(tries == 1.0, trusted)))
+    _attempt(known, guess, at(w, S.guess + sd), at(w, S.guess + sd + nl), ev, inside, P, d, s, nz, g)
     ok = ld(f, F.okstep) != 0.0
-    nxt = sel(known, 1.0, sel(mor(fresh, last), 3.0, 2.0))   # the try after a failed one (3: none left)
+    nxt = sel(mor(fresh, last), 3.0, sel(mand(first_try, have), 1.0, 2.0))   # the next try (3: none left)
     retry = mand(live, mand(mnot(ok), nxt < 3.0))
     st(f, F.retry, sel(live, sel(retry, nxt, 0.0), ld(f, F.retry)))
     st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
     good = mand(live, ok)
+    if depth > 0:
+        _remember(mand(good, mnot(fresh)), depth, cfg.trust, nb, nl, s, d, g)
     st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
     st(f, F.hist, sel(good, 1.0, ld(f, F.hist)))
     broke = mand(live, mand(mnot(ok), mnot(retry)))
@@ -1023,6 +1136,14 @@ def _gather(st_, pt, l, valid, d, s, nz, g):
     for i in range(s):
         for m in range(d):
             lset(w, S.Y + i * d + m, l, elem3(Y, pt, i, m))
+    for i in range(DEPTH * (s + 2)):
+        for m in range(d):
+            lset(w, S.D + i * d + m, l, elem3(st_.defects, pt, i, m))
+    pr_ = st_.orders
+    lset(f, F.depth, l, float(pr_[pt, 0]))
+    lset(f, F.ordy, l, float(pr_[pt, 1]))
+    lset(f, F.ordl, l, float(pr_[pt, 2]))
+    lset(f, F.trust, l, float(pr_[pt, 3]))
     known = have[pt] != 0 and valid           # factors kept from the last step
     for i in range(nz):
         for j in range(nz):
@@ -1064,6 +1185,14 @@ def _scatter(st_, pt, l, d, s, nz, g):
     for i in range(s):
         for m in range(d):
             put3(Y, pt, i, m, lget(w, S.Y + i * d + m, l))
+    for i in range(DEPTH * (s + 2)):
+        for m in range(d):
+            put3(st_.defects, pt, i, m, lget(w, S.D + i * d + m, l))
+    pr_ = st_.orders
+    pr_[pt, 0] = int(lget(f, F.depth, l))
+    pr_[pt, 1] = int(lget(f, F.ordy, l))
+    pr_[pt, 2] = int(lget(f, F.ordl, l))
+    pr_[pt, 3] = int(lget(f, F.trust, l))
     for i in range(nz):
         for j in range(nz):
             put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, l))

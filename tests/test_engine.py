@@ -29,8 +29,8 @@ def _oracle(system, tab, proj, h, q0, steps):
     return S
 
 
-def _compiled(system, tab, proj, h, q0, steps):
-    eng = integrators.Engine(system, integrators.tableau(tab), proj, h)
+def _compiled(system, tab, proj, h, q0, steps, tolerances=None):
+    eng = integrators.Engine(system, integrators.tableau(tab), proj, h, tolerances=tolerances)
     S = eng.state(q0)
     eng.advance(S, 1, steps)
     return S
@@ -81,13 +81,17 @@ def test_many_steps_track_the_numpy_engine():
 
 def test_the_same_breakdowns_as_the_numpy_engine():
     """Lotka–Volterra points near the edge of the domain with a large step: the same points break
-    down at the same step in both engines, and the others agree."""
+    down at the same step in both engines, and the others agree.  The numpy engine keeps the
+    predictor it was written with (the last step's stages extrapolated, carried factors), so the
+    compiled engine runs that rule here (Tolerances(predictor="extrapolate")): the same Newton path,
+    where the default's path may end on another rounding of a point that passes within 1e-5 of
+    q₁ = 0 (7e-4 apart after 20 steps, measured)."""
     lv = integrators.system("lotka_volterra_2d")
     q0 = np.array([[1.0, 1.0], [0.05, 1.0], [1.0, 0.02], [0.3, 3.0], [2.0, 0.5], [0.01, 0.01]])
     broke = survived = 0
     for tab, proj in (("GLRK2", "none"), ("GLRK2", "symmetric"), ("LobIIIA2", "standard"), ("SRK3", "midpoint")):
         a = _oracle(lv, tab, proj, 0.3, q0, 20)
-        b = _compiled(lv, tab, proj, 0.3, q0, 20)
+        b = _compiled(lv, tab, proj, 0.3, q0, 20, integrators.Tolerances(predictor="extrapolate"))
         assert np.array_equal(a.breakdown_time, b.breakdown_time), (tab, proj, a.breakdown_time, b.breakdown_time)
         # (points pass within 1e-5 of q₁ = 0, where ϑ = log(q₂)/q₁ + q₂ amplifies round-off: 6e-12 measured)
         assert np.max(np.abs(a.q[a.live] - b.q[a.live])) < 1e-10

@@ -45,7 +45,8 @@ def test_the_scratch_layout_lays_every_buffer_end_to_end(s, d, nz):
         assert offsets[0] == 0 and all(b >= a for a, b in zip(offsets, offsets[1:]))
     size = dict(zip(S._fields[:-1], np.diff(list(S))))
     assert (size["Q"], size["T"], size["TT"], size["lu"], size["Jt"], size["z"], size["guess"]) == \
-        (s * d, s * d * d, s * d ** 3, nz * nz, nz * nz, nz, s * d)
+        (s * d, s * d * d, s * d ** 3, nz * nz, nz * nz, nz, (s + 2) * d)       # guess: stages, Λ, μ
+    assert (size["base"], size["D"]) == ((s + 2) * d, kernel.DEPTH * (s + 2) * d)
     assert dict(zip(IP._fields[:-1], np.diff(list(IP)))) == {"piv": nz, "pivt": nz, "ipiv": d, "pt": 1}
     assert F.size == nz + d + (len(F._fields) - 3)           # scale, pscale, then one flag each
 

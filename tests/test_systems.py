@@ -133,16 +133,21 @@ def test_massless_charged_particle_keeps_its_energy_over_long_times():
 def test_lotka_volterra_4d_energy_with_the_symmetric_projection():
     """GLRK2-symmetric from the default point (h = 0.1): the energy error grows linearly here (this
     4-D system is not reversible, so a symmetric method need not bound it): 1.6e-5 over the first
-    tenth of 40,000 steps, 1.3e-4 over the last; unprojected GLRK2 breaks down at t = 5.7.  Checked
-    over 4,000 steps: below 2e-5, completed, and the unprojected run breaks down before t = 10."""
+    tenth of 40,000 steps, 1.3e-4 over the last; unprojected GLRK2 breaks down at t = 4.1 with the
+    carried-factor predictor (Tolerances(predictor="extrapolate")) and at t = 12.9 with the default,
+    whose better guess finds two more roots.  Checked over 4,000 steps: below 2e-5, completed, and
+    the unprojected runs break down before t = 10 and t = 20."""
     sy = integrators.system("lotka_volterra_4d")
     sol = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="symmetric",
                                 steps=4000, save_every=100)
     assert np.isinf(sol.breakdown_time).all()
     H = sy.H(sol.q[:, 0])
     assert np.max(np.abs(H - H[0]) / abs(H[0])) < 2e-5
-    bare = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="none", steps=100)
+    bare = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="none", steps=100,
+                                 tolerances=integrators.Tolerances(predictor="extrapolate"))
     assert bare.breakdown_time[0] < 10.0
+    bare = integrators.integrate(sy, sy.defaults["q0"], tableau="GLRK2", projection="none", steps=200)
+    assert 10.0 < bare.breakdown_time[0] < 20.0
 
 
 # -- a Solov'ev guiding centre and the 6-D full orbit ------------------------------------------------

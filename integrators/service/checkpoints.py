@@ -95,13 +95,15 @@ def write_slab(folder, name, state: dict, s_max):
 
 
 def _pad_stages(state, s_max):
-    """Y (n, s, d) and jac_z (n, s + 2, d) padded with zeros to the scene's largest s (the file's
-    schema); driver._unpad cuts them back."""
+    """Y (n, s, d), jac_z (n, s + 2, d) and the predictor's defects (n, DEPTH (s + 2), d) padded with
+    zeros at their ends to the scene's largest s (the file's schema); driver._unpad cuts them back."""
+    from ..kernel import DEPTH
     Y = state["Y"]
     extra = s_max - Y.shape[1]
     if extra > 0:
-        pad = lambda a: np.concatenate([a, np.zeros((a.shape[0], extra) + a.shape[2:], a.dtype)], axis=1)
-        state = dict(state, Y=pad(Y), jac_z=pad(state["jac_z"]))
+        pad = lambda a, k: np.concatenate([a, np.zeros((a.shape[0], k) + a.shape[2:], a.dtype)], axis=1)
+        state = dict(state, Y=pad(Y, extra), jac_z=pad(state["jac_z"], extra),
+                     defects=pad(state["defects"], DEPTH * extra))
     return state
 
 

@@ -563,7 +563,8 @@ def last_checkpoint_step(steps, every) -> int:
 
 
 def _unpad(state, s):
-    return dict(state, Y=state["Y"][:, :s], jac_z=state["jac_z"][:, :s + 2])
+    from ..kernel import DEPTH
+    return dict(state, Y=state["Y"][:, :s], jac_z=state["jac_z"][:, :s + 2], defects=state["defects"][:, :DEPTH * (s + 2)])
 
 
 BATCH_SECONDS = 2.0          # outputs are taken together in batches of about this much advancing

@@ -74,7 +74,8 @@ def _check_pairs(f, runs, scene, limit, State):
         older = [k for k in STATE_FIELDS if "checkpoint/a" in g and k not in g["checkpoint/a"]]
         if older and all(k in NOTED_SINCE_ISSUE_56 for k in older):
             raise DamagedFile(f"'{path}' was written by an earlier version, whose checkpoints do not note where "
-                              f"Newton's factors were taken ({', '.join(older)}): a resume could not give the bits of "
+                              f"Newton's factors were taken or what the predictor learnt ({', '.join(older)}): a resume "
+                              "could not give the bits of "
                               "the run it continues. Its results read (poincare plot, read_run); to continue, start "
                               "again with --force")
         lengths = set()
@@ -125,7 +126,8 @@ def _check_pairs(f, runs, scene, limit, State):
                     raise damaged(f"{ds.name} has shape {ds.shape} and type {ds.dtype}")
 
 
-NOTED_SINCE_ISSUE_56 = ("have_lu", "jac_z", "jac_q", "jac_lam")   # checkpoint fields added then
+NOTED_SINCE_ISSUE_56 = ("have_lu", "jac_z", "jac_q", "jac_lam",   # checkpoint fields added then,
+                        "defects", "orders")                      # and the predictor's (issue 55)
 
 
 def open_for_resume(path):

@@ -1,6 +1,6 @@
 """The compiled engine's results and speed, for comparing two versions of the kernel side by side.
 
-    python scripts/tools/engine_bits.py dump FILE.npz      # every admissible pair on three systems, 15 steps
+    python scripts/tools/engine_bits.py dump FILE.npz [PREDICTOR]   # every admissible pair on three systems, 15 steps
     python scripts/tools/engine_bits.py compare A.npz B.npz
     python scripts/tools/engine_bits.py speed              # point-steps/s, 10^4 points, 1 thread, best of 3
 
@@ -19,7 +19,10 @@ import invariants
 from integrators.projections import admission
 
 
-def dump(path):
+def dump(path, predictor=None):
+    """``predictor``: Tolerances.predictor (None: the default); "extrapolate" gives the bits of the
+    engine before issue 55, to compare with a dump made there."""
+    tol = integrators.Tolerances() if predictor is None else integrators.Tolerances(predictor=predictor)
     out = {}
     cases = (("guiding_centre_symmetric", 10.0, invariants.loop("guiding_centre", 64)),
              ("point_vortices", 0.1, np.array([[1, 0.1, 1, -0.1]])
@@ -32,7 +35,7 @@ def dump(path):
             for proj in integrators.PROJECTIONS:
                 if admission(T, proj):
                     continue
-                e = integrators.Engine(sy, T, proj, h)
+                e = integrators.Engine(sy, T, proj, h, tolerances=tol)
                 st = e.state(q0)
                 e.advance(st, 1, 15)
                 for f in ("q", "p", "Lam", "iterations", "breakdown_time"):
@@ -66,8 +69,8 @@ def speed():
 
 if __name__ == "__main__":
     cmd = sys.argv[1:2]
-    if cmd == ["dump"] and len(sys.argv) == 3:
-        dump(sys.argv[2])
+    if cmd == ["dump"] and len(sys.argv) in (3, 4):
+        dump(*sys.argv[2:])
     elif cmd == ["compare"] and len(sys.argv) == 4:
         sys.exit(compare(sys.argv[2], sys.argv[3]))
     elif cmd == ["speed"]:
