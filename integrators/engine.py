@@ -40,10 +40,12 @@ class LaneUse(NamedTuple):
     steps and ``iterations`` the Newton iterations they ran, summed over the blocks.  The point-steps
     the call made (the rise of ``State.steps``) over W · rounds is the share of lane steps that did
     work (1: no lane ever idled); the points' iterations (the rise of ``State.iterations``) over
-    W · iterations that of lane iterations (a lane that converged waits for its group's slowest)."""
+    W · iterations that of lane iterations (a lane that converged waits for its group's slowest);
+    ``jacobians`` the Jacobians the groups evaluated and factorised (every lane of a group at once)."""
     W: int
     rounds: int
     iterations: int
+    jacobians: int
 
 CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_history", "live", "breakdown_time",
                      "iterations", "steps", "have_lu", "jac_z", "jac_q", "jac_lam", "defects", "orders")
@@ -156,7 +158,7 @@ class State:
         self.jac_lam = np.zeros((n, d), dt)
         from .kernel import DEPTH
         self.defects = np.zeros((n, DEPTH * (s + 2), d), dt)
-        self.orders = np.zeros((n, 4), dtype=np.uint8)
+        self.orders = np.zeros((n, 5), dtype=np.uint8)
         self.needs_factors = False      # have_lu read from a checkpoint: lu, piv to be rebuilt
 
     @classmethod
@@ -254,6 +256,10 @@ class Tolerances:
     trust : a step whose last guess was off by at most this (relative to max(|q|, 1)) starts its
         Newton from a Jacobian at the guess; the others from the factors carried from the last step
         (default 1e-3; ``"defects"`` only: the other predictors always carry them)
+    jacobian_age : ... once the carried factors are at least this many steps old (default 1:
+        every trusted step; 2 takes about half the Jacobians for about one more iteration a step,
+        but lanes in lockstep factorise whenever one of them asks, so it pays only where the
+        group's points keep in phase: docs/benchmarks.md)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
@@ -270,6 +276,7 @@ class Tolerances:
     predictor: str = "defects"
     depth: int = 8
     trust: float = 1e-3
+    jacobian_age: int = 1
 
     def __post_init__(self):
         from .kernel import DEPTH
@@ -282,6 +289,9 @@ class Tolerances:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"Tolerances.{name} must be a finite number ≥ 0, got {v!r}")
+        if isinstance(self.jacobian_age, bool) or not isinstance(self.jacobian_age, (int, np.integer)) or \
+                not 1 <= self.jacobian_age <= 255:
+            raise ValueError(f"Tolerances.jacobian_age must be an integer from 1 to 255, got {self.jacobian_age!r}")
         if isinstance(self.maxiter, bool) or not isinstance(self.maxiter, (int, np.integer)) or self.maxiter < 1:
             raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
 
@@ -297,7 +307,8 @@ class Tolerances:
                       accept=1.0 if self.accept_unconverged else 0.0,
                       velocity=1.0 if self.predictor == "velocity" else 0.0,
                       depth=float(self.depth) if self.predictor == "defects" else 0.0,
-                      trust=self.trust if self.predictor == "defects" else -1.0)
+                      trust=self.trust if self.predictor == "defects" else -1.0,
+                      age=float(self.jacobian_age))
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 
@@ -468,7 +479,7 @@ class Engine:
     def _rounds(state, block):
         if int(block) < 1:
             raise ValueError(f"block must be a positive number of points, got {block!r}")
-        return np.zeros((-(-state.q.shape[0] // int(block)), 2), dtype=np.int64)
+        return np.zeros((-(-state.q.shape[0] // int(block)), 3), dtype=np.int64)
 
 
 class MapEngine:

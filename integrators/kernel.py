@@ -166,9 +166,11 @@ Flags = namedtuple("Flags", [
     "depth",                      # the predictor's defects the lane's point holds (0 … DEPTH)
     "ordy", "ordl",               # the order of the defects' extrapolation: stages, multipliers
     "trust",                      # the last guess was good: a Jacobian at the guess, not carried
+    "age",                        # the steps since the lane's factors were taken
     "held",                       # whether the lane holds a point (IntScratch.pt)
     "retry",                      # the lane's step failed once: its next _step is the second try
     "gits",                       # (lane 0) the Newton iterations the group has run
+    "gjac",                       # (lane 0) the Jacobians it has evaluated and factorised
     "size"])
 Flags.__doc__ = "Offsets of the per-lane real (never complex) bookkeeping."
 
@@ -205,7 +207,7 @@ def layout(s, d, nz):
     return S, F, IP
 
 
-Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh accept velocity depth trust")
+Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh accept velocity depth trust age")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
@@ -214,7 +216,7 @@ Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads
 adds h·q̇(q_n) to the stage predictor; ``depth`` (0 … DEPTH) how many of the last steps' defects
 correct the guess (:func:`_guess`); a step whose last guess was off by at most ``trust`` (relative)
 starts its Newton from a Jacobian at the guess instead of the factors carried from the last step
-(negative: never)."""
+(negative: never) once those factors are ``age`` steps old."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
                                         "lu piv have_lu jac_z jac_q jac_lam defects orders")
@@ -251,7 +253,7 @@ def _records(lay):
 
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8])
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9])
 
 
 @njit(inline='always', **_OPTS)
@@ -319,7 +321,10 @@ def lu_factor(A, piv, n):
             f = ld(A, i * n + col) * inv
             st(A, i * n + col, f)
             nonzero = f != 0.0
-            if anyl(nonzero):
+            if not anyl(mnot(nonzero)):           # every lane eliminates: no selects needed
+                for j in range(col + 1, n):
+                    st(A, i * n + j, ld(A, i * n + j) - f * ld(A, col * n + j))
+            elif anyl(nonzero):
                 for j in range(col + 1, n):
                     x = ld(A, i * n + j)
                     st(A, i * n + j, sel(nonzero, x - f * ld(A, col * n + j), x))
@@ -766,11 +771,13 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
         else:
             post_term(P.post, z, jac, r, Jx, ev, P.k, P.plan.sigma, d, g.w, g.S)
         if jac:
+            lset(f, F.gjac, 0, lget(f, F.gjac, 0) + 1.0)
             lu_factor(Jx, pivx, nz)
             if W > 1:                             # every lane factorised, the lanes that asked keep theirs
                 _keep_factors(LU, piv, Jt, pivt, stale, nz)
             if mode == MODE_MAIN:                 # where they were taken: what refactor() rebuilds them from
                 _note_jacobian(z, stale, nz, d, w, S)
+                st(f, F.age, sel(stale, 0.0, ld(f, F.age)))
         lu_solve(LU, piv, r, nz)                  # r is now −δ
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         _update(z, r, done, scale, nz, f, F)
@@ -1093,7 +1100,7 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
             st(guess, sd + nl + m, sel(last, 0.0, ld(guess, sd + nl + m)))
     st(f, F.active, sel(live, 1.0, 0.0))
     have = ld(f, F.have) != 0.0
-    trusted = ld(f, F.trust) != 0.0             # carried factors: try 0 untrusted, try 1 trusted
+    trusted = mand(ld(f, F.trust) != 0.0, ld(f, F.age) >= cfg.age)   # carried: try 0 untrusted, try 1 trusted
     known = mand(have, mor(mand(first_try, mnot(trusted)), mand(tries == 1.0, trusted)))
     _attempt(known, guess, at(w, S.guess + sd), at(w, S.guess + sd + nl), ev, inside, P, d, s, nz, g)
     ok = ld(f, F.okstep) != 0.0
@@ -1105,6 +1112,8 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
     if depth > 0:
         _remember(mand(good, mnot(fresh)), depth, cfg.trust, nb, nl, s, d, g)
     st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
+    age = ld(f, F.age)
+    st(f, F.age, sel(good, sel(age < 255.0, age + 1.0, age), age))
     st(f, F.hist, sel(good, 1.0, ld(f, F.hist)))
     broke = mand(live, mand(mnot(ok), mnot(retry)))
     st(f, F.tbrk, sel(broke, t_next, ld(f, F.tbrk)))
@@ -1144,6 +1153,7 @@ def _gather(st_, pt, l, valid, d, s, nz, g):
     lset(f, F.ordy, l, float(pr_[pt, 1]))
     lset(f, F.ordl, l, float(pr_[pt, 2]))
     lset(f, F.trust, l, float(pr_[pt, 3]))
+    lset(f, F.age, l, float(pr_[pt, 4]))
     known = have[pt] != 0 and valid           # factors kept from the last step
     for i in range(nz):
         for j in range(nz):
@@ -1193,6 +1203,7 @@ def _scatter(st_, pt, l, d, s, nz, g):
     pr_[pt, 1] = int(lget(f, F.ordy, l))
     pr_[pt, 2] = int(lget(f, F.ordl, l))
     pr_[pt, 3] = int(lget(f, F.trust, l))
+    pr_[pt, 4] = int(lget(f, F.age, l))
     for i in range(nz):
         for j in range(nz):
             put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, l))
@@ -1217,8 +1228,8 @@ def _next_live(live, order, nxt, hi):
 def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg,
            proto, lay):
     """The live points among order[lo … hi − 1] through ``nsteps`` steps each, W (= len(proto))
-    lanes at a time, with the thread's scratch arrays; returns the group steps taken and the Newton
-    iterations they ran.
+    lanes at a time, with the thread's scratch arrays; returns the group steps taken, the Newton
+    iterations they ran and the Jacobians they took.
 
     **Lanes are refilled.**  Each lane holds one point and counts its steps (``F.jn``); after every
     step, a lane whose point has taken its ``nsteps`` steps or has broken down hands the point back
@@ -1244,7 +1255,7 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0,
     live = st_.live
     nxt = _next_live(live, order, lo, hi)
     if nxt == hi or nsteps <= 0:
-        return 0, 0
+        return 0, 0, 0
     pad = order[nxt]                              # empty lanes hold this point's values, not live
     held = 0
     for l in range(W):
@@ -1273,7 +1284,7 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0,
                         lset(f, F.held, l, 0.0)
                         lset(f, F.live, l, 0.0)
                         held -= 1
-    return rounds, int(lget(f, F.gits, 0))
+    return rounds, int(lget(f, F.gits, 0)), int(lget(f, F.gjac, 0))
 
 
 @njit(parallel=True, **_OPTS)
@@ -1289,10 +1300,11 @@ def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, di
 
     ``st_``: the :class:`StateArrays` as a plain tuple; ``tolerances``: the float64 array of a
     :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``lay``: :func:`layout` as
-    three int64 arrays (Engine._layout); ``rounds`` (int64, a row per block): the steps and the
-    Newton iterations each block's group of lanes ran (:func:`_block`), so point-steps / (W · Σ
-    steps) is the share of lane steps that did work, and the points' iterations / (W · Σ
-    iterations) that of lane iterations.
+    three int64 arrays (Engine._layout); ``rounds`` (int64, a row per block): the steps, the
+    Newton iterations and the Jacobians (evaluated and factorised, the projection's solve's
+    included) each block's group of lanes ran (:func:`_block`), so point-steps / (W · Σ steps) is
+    the share of lane steps that did work, and the points' iterations / (W · Σ iterations) that of
+    lane iterations.
     """
     arrays = StateArrays(*st_)
     q, Y, lu = arrays.q, arrays.Y, arrays.lu
@@ -1318,8 +1330,9 @@ def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, di
         FS = np.zeros(nf)
         IS = np.zeros(ni, np.int64)
         QR = np.zeros(d)
-        rounds[bi, 0], rounds[bi, 1] = _block(WS, FS, IS, QR, order, bi * block, min(m, (bi + 1) * block), ev, inside,
-                                              post, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg, proto, lay)
+        rounds[bi, 0], rounds[bi, 1], rounds[bi, 2] = _block(
+            WS, FS, IS, QR, order, bi * block, min(m, (bi + 1) * block), ev, inside, post, kp, h, tb, plan, t0, first,
+            nsteps, st_, d, s, nz, cfg, proto, lay)
 
 
 def advance_argument(sig, name):
