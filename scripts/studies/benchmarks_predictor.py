@@ -7,18 +7,24 @@ Both rules run in this process on the same points, one thread, alternating which
 ``Tolerances(predictor="extrapolate")`` (the last step's stages extrapolated, the factors carried
 from the last step: the engine's bits before) and the default ``Tolerances()`` (that guess corrected
 by the extrapolated defects of the last steps, a Jacobian at the guess where the last guess was
-good).  guiding_centre_symmetric, h = 10:
+good), and the same with ``jacobian_age=2`` (a trusted step keeps factors one step old).
+guiding_centre_symmetric, h = 10:
 
 * iterations: mean Newton iterations (residual evaluations) per point-step, 32 points near the
   default loop, 50 steps from the start (the first steps, with a shorter history, included), and
   one orbit (W = 1) of GLRK4/6-symmetric;
 * speed: point-steps per second of 10⁴ points near the loop and 10⁴ spread over its bounding box,
   50 steps from the start in one call, best of 2 in each of 2 rounds; one orbit, 2,000 steps;
-* robustness: iterations and breakdowns at larger steps and on two other systems.
+* robustness: iterations and breakdowns at larger steps and on two other systems;
+* flops per point-step as coded: Newton iterations × the residual-and-solve count of
+  scripts/studies/engine_lanes.py, plus Jacobians × a count of the Jacobian's extra work (second
+  derivatives, contractions, assembly, LU), both read off the generated point function and the
+  kernel's loops (a lower bound: selects, loads and bookkeeping are not counted).
 """
 import argparse
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -29,7 +35,10 @@ import invariants
 from integrators.engine import set_threads
 
 ROOT = Path(__file__).resolve().parents[2]
-RULES = {"before": integrators.Tolerances(predictor="extrapolate"), "defects": integrators.Tolerances()}
+sys.path.insert(0, str(ROOT / "scripts" / "studies"))
+from engine_lanes import _ops, flops_per_iteration  # noqa: E402  (the count of one Newton iteration)
+RULES = {"before": integrators.Tolerances(predictor="extrapolate"), "defects": integrators.Tolerances(),
+         "age2": integrators.Tolerances(jacobian_age=2)}
 PAIRS = (("GLRK1", "none"), ("GLRK2", "symmetric"), ("GLRK2", "standard"), ("SRK3", "symmetric"),
          ("GLRK4", "symmetric"), ("GLRK6", "symmetric"))
 
@@ -63,14 +72,32 @@ def iterations(sy):
     return rows
 
 
+def jacobian_flops(system, tableau, eng):
+    """The extra floating-point operations of a Jacobian as coded, over a residual evaluation: the
+    point function's second derivatives at each stage (and at the coupled projection's point), the
+    contractions K_i, the assembly of the nz × nz matrix and its LU (2nz³/3)."""
+    from integrators.codegen import _load
+    from integrators import kernel
+    body = Path(_load(system).__file__).read_text().split("def _evaluate_real")[1].split("def _evaluate_complex")[0]
+    need = body.split("if _need:")[1] if "if _need:" in body else ""
+    extra_ev = _ops([ln.replace("st(", "x = (") for ln in need.splitlines()
+                     if ln.startswith("        _x") or ln.startswith("        st(")])
+    s, d, nz = tableau.s, system.d, eng.nz
+    coupled = eng.plan.pre == kernel.PRE_UNKNOWN
+    evals = s + (1 if coupled else 0)
+    stage = s * (2 * d ** 3 + 2 * d * d) + s * s * d * d * (3 + 2 * s)
+    proj = d * d * (s * (3 + 2 * s) + 4 * s + 10) if coupled else 0
+    return evals * extra_ev + stage + proj + 2 * nz ** 3 // 3 + nz * nz
+
+
 def rate(e, q0, steps, lanes=None):
     best = np.inf
     for _ in range(2):
         st = e.state(q0)
         t = time.perf_counter()
-        e.advance(st, 1, steps, lanes=lanes)
+        use = e.advance(st, 1, steps, lanes=lanes)
         best = min(best, time.perf_counter() - t)
-    return q0.shape[0] * steps / best, st.iterations.sum() / st.steps.sum()
+    return q0.shape[0] * steps / best, st.iterations.sum() / st.steps.sum(), use.jacobians / max(use.rounds, 1)
 
 
 def speed(sy, n):
@@ -92,10 +119,18 @@ def speed(sy, n):
         for rule in RULES:
             row[rule] = max(r[0] for r in res[rule])
             row[rule + "_iterations"] = res[rule][0][1]
+            row[rule + "_jacobians"] = res[rule][0][2]
+            e = engine(sy, tab, proj, 10.0, rule)
+            row[rule + "_flops"] = (flops_per_iteration(sy, e.tableau, e) * row[rule + "_iterations"]
+                                    + jacobian_flops(sy, e.tableau, e) * row[rule + "_jacobians"])
         row["ratio"] = row["defects"] / row["before"]
+        row["ratio_age2"] = row["age2"] / row["before"]
         rows.append(row)
-        print(f"{row['pair']:18s} {name:5s} before {row['before']:11,.0f}  defects {row['defects']:11,.0f}  "
-              f"{row['ratio']:.2f}x  it. {row['before_iterations']:.2f} -> {row['defects_iterations']:.2f}", flush=True)
+        print(f"{row['pair']:18s} {name:5s} before {row['before']:11,.0f}  defects {row['defects']:11,.0f} "
+              f"{row['ratio']:.2f}x  age2 {row['ratio_age2']:.2f}x  it. {row['before_iterations']:.2f} -> "
+              f"{row['defects_iterations']:.2f} / {row['age2_iterations']:.2f}  J/step {row['before_jacobians']:.2f} -> "
+              f"{row['defects_jacobians']:.2f} / {row['age2_jacobians']:.2f}  flop/step {row['before_flops']:.0f} -> "
+              f"{row['defects_flops']:.0f} / {row['age2_flops']:.0f}", flush=True)
     return rows
 
 

@@ -247,6 +247,15 @@ Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
   momentum 2.2e-30) GLRK5 + symmetric's solution order read 5.90 (its last point 4.2e-30 on the
   floor) and GLRK6 + symplectic's momentum 15.38 (its last point left out): the measured floors
   above are where each series levels.
+* **GLRK3 + standard's solution order −2.13 and LobIIIA3 + standard's energy order 2.77 are
+  round-off, not the methods.** GLRK3 + standard's solution errors 3.4e-12 and 4.7e-14 at h = 2⁻⁵
+  and 2⁻⁶ (local order 6.2) are followed by 1.3e-14 and 8.4e-14, above the floor of 1e-14 by
+  round-off accumulated over 128–512 steps, so the fit's last three points are round-off; its
+  energy (6.01), momentum (6.87) and long-double (6.00) orders agree with the paper.
+  LobIIIA3 + standard's energy error at h = 2⁻⁹ is 4.6e-15, just above its floor of 2e-15 (local
+  orders before it 3.9–4.0; long double 4.12). Issue 55's predictor moved these last bits: before
+  it the two errors happened to be 4.4e-16 and 8.8e-16, under the floors, and the fits read 5.99 and
+  3.90.
 * **No reference floor any more; the floor was double precision, and long double lowers it 2,048×.** The mpmath reference agrees with a
   36-digit run to the last bit of a double, so every solution error above 1e-14 is the method's (the
   DOP853 reference used before was off by 4.1e-14, which hid GLRK4's order: 7.4–7.5 then, 7.95–8.01
