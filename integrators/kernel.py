@@ -32,7 +32,6 @@ from a checkpoint, or split into calls anywhere, is bitwise the run in one call.
 """
 from __future__ import annotations
 
-import math
 from collections import namedtuple
 
 import numpy as np
@@ -62,9 +61,6 @@ WIDE_NZ = 12            # lanes, whose independent chains hide each other's late
 #                         (docs/benchmarks-history.md, "Sixteen lanes for small Newton systems").
 DEPTH = 8               # the stage predictor's memory: the defects of the last DEPTH steps' guesses
 #                         (:func:`_guess`; how many a pair uses is Newton.depth, run-time data)
-BETA = tuple(tuple(float((-1) ** j * math.comb(m, j + 1)) if j < m else 0.0 for j in range(DEPTH))
-             for m in range(1, DEPTH + 1))
-#                         BETA[m - 1]: the polynomial of degree m − 1 through m values, one step on
 WIDE_POINTS = 1024      # ... and only for calls of at least this many points: a second width is a
 #                         second compilation of the kernel (~35 s a dimension), paid where a run is
 #                         long enough to gain it back, not by every small scene and test.
