@@ -2,6 +2,7 @@
 (docs/benchmarks.md, "The stage predictor").
 
     python scripts/studies/benchmarks_predictor.py [--points 10000] [--out docs/figures/benchmark_predictor.json]
+    python scripts/studies/benchmarks_predictor.py --flops   # only the flop counts of an iteration and a Jacobian
 
 Both rules run in this process on the same points, one thread, alternating which goes first:
 ``Tolerances(predictor="extrapolate")`` (the last step's stages extrapolated, the factors carried
@@ -160,9 +161,16 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=10000)
     ap.add_argument("--out", default=str(ROOT / "docs/figures/benchmark_predictor.json"))
+    ap.add_argument("--flops", action="store_true", help="print the flop counts as coded and stop")
     a = ap.parse_args()
     set_threads(1)
     sy = integrators.system("guiding_centre_symmetric")
+    if a.flops:
+        for tab, proj in PAIRS:
+            e = engine(sy, tab, proj, 10.0, "defects")
+            it, jac = flops_per_iteration(sy, e.tableau, e), jacobian_flops(sy, e.tableau, e)
+            print(f"{tab}-{proj}: iteration {it} flop, Jacobian {jac} flop more: {jac / it:.1f} iterations")
+        return
     t0 = time.perf_counter()
     out = dict(date=time.strftime("%Y-%m-%d"), machine=platform.processor() or platform.machine(),
                iterations=iterations(sy), speed=speed(sy, a.points), robustness=robustness())
