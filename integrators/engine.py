@@ -256,6 +256,19 @@ class Tolerances:
     trust : a step whose last guess was off by at most this (relative to max(|q|, 1)) starts its
         Newton from a Jacobian at the guess; the others from the factors carried from the last step
         (default 1e-3; ``"defects"`` only: the other predictors always carry them)
+    trust_max_unknowns : ... and only in pairs of at most this many Newton unknowns (default 16:
+        GLRK1, GLRK2 and SRK3 with any projection on d = 4); a larger LU costs more than the
+        iterations it saves, so those pairs keep the carried factors (docs/benchmarks.md)
+    refresh_floor : no fresh Jacobian after an update of at most this size (relative, like tol),
+        however little it contracted: that small, the ratio measures round-off, not the factors
+        (default 1e-12, about 4,500 ulps; ``"defects"`` only: the other predictors keep the rule
+        before, bitwise; scaled to double-double like tol)
+    refresh_horizon : ... and only where those factors, at the rate θ of that iteration, would not
+        converge within this many more iterations (θ^horizon·|δ| > tol): about a Jacobian's cost in
+        iterations plus the two it takes after.  Default -1: 2 + ⌈unknowns / 4⌉ (3 for GLRK1-none,
+        5 for GLRK2-symmetric, 9 for GLRK6-symmetric on d = 4; the Jacobian as coded costs 1.6, 3.4
+        and 7.6 iterations, ``scripts/studies/benchmarks_predictor.py --flops``); 0: no such test
+        (``"defects"`` only, like refresh_floor)
     jacobian_age : ... once the carried factors are at least this many steps old (default 1:
         every trusted step; 2 takes about half the Jacobians for about one more iteration a step,
         but lanes in lockstep factorise whenever one of them asks, so it pays only where the
@@ -276,6 +289,9 @@ class Tolerances:
     predictor: str = "defects"
     depth: int = 8
     trust: float = 1e-3
+    trust_max_unknowns: int = 0
+    refresh_floor: float = 1e-12
+    refresh_horizon: int = -1
     jacobian_age: int = 1
 
     def __post_init__(self):
@@ -285,29 +301,44 @@ class Tolerances:
         if isinstance(self.depth, bool) or not isinstance(self.depth, (int, np.integer)) or \
                 not 1 <= self.depth <= DEPTH:
             raise ValueError(f"Tolerances.depth must be an integer from 1 to {DEPTH}, got {self.depth!r}")
-        for name in ("tol", "stall", "stall_complex", "refresh", "trust"):
+        for name in ("tol", "stall", "stall_complex", "refresh", "trust", "refresh_floor"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"Tolerances.{name} must be a finite number ≥ 0, got {v!r}")
         if isinstance(self.jacobian_age, bool) or not isinstance(self.jacobian_age, (int, np.integer)) or \
                 not 1 <= self.jacobian_age <= 255:
             raise ValueError(f"Tolerances.jacobian_age must be an integer from 1 to 255, got {self.jacobian_age!r}")
+        if isinstance(self.trust_max_unknowns, bool) or not isinstance(self.trust_max_unknowns, (int, np.integer)) \
+                or self.trust_max_unknowns < 0:
+            raise ValueError("Tolerances.trust_max_unknowns must be an integer ≥ 0, "
+                             f"got {self.trust_max_unknowns!r}")
+        if isinstance(self.refresh_horizon, bool) or not isinstance(self.refresh_horizon, (int, np.integer)) \
+                or not -1 <= self.refresh_horizon <= 64:
+            raise ValueError(f"Tolerances.refresh_horizon must be an integer from -1 to 64, got {self.refresh_horizon!r}")
         if isinstance(self.maxiter, bool) or not isinstance(self.maxiter, (int, np.integer)) or self.maxiter < 1:
             raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
 
-    def array(self, double_double=False) -> np.ndarray:
-        """The rule as the kernel reads it: one float64 array in the order of the kernel's
-        :data:`~integrators.kernel.Newton` record (its one owner), filled by name.  With
-        ``double_double``, tol and stall scaled from double's eps to 2⁻¹⁰⁴ (the same rule, one
-        number type down)."""
+    def horizon(self, unknowns):
+        """The refresh horizon for a pair of ``unknowns`` Newton unknowns (``refresh_horizon``)."""
+        return 2 + -(-int(unknowns) // 4) if self.refresh_horizon < 0 else self.refresh_horizon
+
+    def array(self, double_double=False, unknowns=0) -> np.ndarray:
+        """The rule as the kernel reads it for a pair of ``unknowns`` Newton unknowns: one float64
+        array in the order of the kernel's :data:`~integrators.kernel.Newton` record (its one owner),
+        filled by name.  With ``double_double``, tol, stall and the refresh floor scaled from
+        double's eps to 2⁻¹⁰⁴ (the same rule, one number type down)."""
         from .kernel import Newton
         scale = 2.0 ** -104 / np.finfo(np.float64).eps if double_double else 1.0
+        defects = self.predictor == "defects"
+        fresh = defects and unknowns <= self.trust_max_unknowns
         values = dict(tol=self.tol * scale, stall=self.stall * scale, stall_complex=self.stall_complex,
                       maxiter=float(self.maxiter), refresh=self.refresh,
+                      floor=self.refresh_floor * scale if defects else 0.0,
+                      horizon=float(self.horizon(unknowns)) if defects else 0.0,
                       accept=1.0 if self.accept_unconverged else 0.0,
                       velocity=1.0 if self.predictor == "velocity" else 0.0,
                       depth=float(self.depth) if self.predictor == "defects" else 0.0,
-                      trust=self.trust if self.predictor == "defects" else -1.0,
+                      trust=self.trust if fresh else -1.0,
                       age=float(self.jacobian_age))
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
@@ -363,7 +394,8 @@ class Engine:
         if not isinstance(self.tolerances, Tolerances):
             raise ValueError(f"tolerances must be an integrators.engine.Tolerances, got {type(tolerances).__name__}")
         self.tab = kernel.flat_tableau(tableau, predictor(tableau.c, self.tolerances.predictor))
-        self._cfg, self._cfg_dd = self.tolerances.array(), self.tolerances.array(double_double=True)
+        self._cfg = self.tolerances.array(unknowns=self.nz)
+        self._cfg_dd = self.tolerances.array(double_double=True, unknowns=self.nz)
         self._functions = {}
 
     @property

@@ -203,12 +203,15 @@ def layout(s, d, nz):
     return S, F, IP
 
 
-Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh accept velocity depth trust age")
+Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
 ``maxiter`` iterations; a fresh Jacobian after an iteration that contracted by less than
-``refresh``; ``accept`` (≠ 0) takes a finite unconverged iterate after maxiter; ``velocity`` (≠ 0)
+``refresh`` while its update was larger than ``floor`` (below it the ratio is round-off's) and
+the factors would not reach ``tol`` within ``horizon`` more iterations at that rate (0: no such
+test);
+``accept`` (≠ 0) takes a finite unconverged iterate after maxiter; ``velocity`` (≠ 0)
 adds h·q̇(q_n) to the stage predictor; ``depth`` (0 … DEPTH) how many of the last steps' defects
 correct the guess (:func:`_guess`); a step whose last guess was off by at most ``trust`` (relative)
 starts its Newton from a Jacobian at the guess instead of the factors carried from the last step
@@ -249,7 +252,7 @@ def _records(lay):
 
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9])
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11])
 
 
 @njit(inline='always', **_OPTS)
@@ -703,11 +706,15 @@ def _update(z, r, done, scale, nz, f, F):
 
 
 @njit(inline='always', **_OPTS)
-def _judge(f, F, tol, stall, refresh):
+def _judge(f, F, tol, stall, refresh, floor, horizon):
     """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol,
     or ≤ stall once the update stops halving) or on, with a fresh Jacobian next time if this
-    iteration contracted by less than ``refresh``.  Written with masks and selects, so W lanes are
-    judged at once (the same comparisons and the one division of the scalar path, lane by lane)."""
+    iteration contracted by θ > ``refresh``, its update was larger than ``floor`` (an update a few
+    thousand ulps small measures round-off, not the factors: a Jacobian there was the engine's
+    largest waste on high-order pairs, docs/benchmarks.md) and θ^horizon·|δ| > tol: the factors
+    would not converge within ``horizon`` more iterations, about what a Jacobian costs in
+    iterations plus the two it takes after (``horizon`` 0: the first two tests alone).  Written
+    with masks and selects, so W lanes are judged at once (the same comparisons and the one division of the scalar path, lane by lane)."""
     on = ld(f, F.done) == 0.0
     st(f, F.its, ld(f, F.its) + sel(on, 1.0, 0.0))
     sz, prev = ld(f, F.norm), ld(f, F.prev)
@@ -719,7 +726,13 @@ def _judge(f, F, tol, stall, refresh):
     goes = mand(on, mnot(ends))
     st(f, F.done, sel(ends, 1.0, ld(f, F.done)))
     st(f, F.ok, sel(mand(on, converged), 1.0, ld(f, F.ok)))
-    st(f, F.stale, sel(goes, sel(mand(np.isfinite(theta), theta > refresh), 1.0, 0.0), ld(f, F.stale)))
+    left = sel(goes, np.inf, np.inf)             # |δ| after ``horizon`` more iterations at rate θ
+    if horizon > 0.0:
+        left = sz
+        for _ in range(int(horizon)):
+            left = left * theta
+    tired = mand(mand(np.isfinite(theta), theta > refresh), mand(sz > floor, left > tol))
+    st(f, F.stale, sel(goes, sel(tired, 1.0, 0.0), ld(f, F.stale)))
     st(f, F.prev, sel(goes, sz, prev))
 
 
@@ -777,7 +790,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
         lu_solve(LU, piv, r, nz)                  # r is now −δ
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         _update(z, r, done, scale, nz, f, F)
-        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh)
+        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh, cfg.floor, cfg.horizon)
     for l in range(W):                            # lanes out of iterations
         if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)
