@@ -264,11 +264,13 @@ class Tolerances:
         (default 1e-12, about 4,500 ulps; ``"defects"`` only: the other predictors keep the rule
         before, bitwise; scaled to double-double like tol)
     refresh_horizon : ... and only where those factors, at the rate θ of that iteration, would not
-        converge within this many more iterations (θ^horizon·|δ| > tol): about a Jacobian's cost in
-        iterations plus the two it takes after.  Default -1: 2 + ⌈unknowns / 4⌉ (3 for GLRK1-none,
-        5 for GLRK2-symmetric, 9 for GLRK6-symmetric on d = 4; the Jacobian as coded costs 1.6, 3.4
-        and 7.6 iterations, ``scripts/studies/benchmarks_predictor.py --flops``); 0: no such test
-        (``"defects"`` only, like refresh_floor)
+        converge within this many more iterations (θ^horizon·|δ| > tol).  Default 0: no such test;
+        -1: 2 + ⌈unknowns / 4⌉, about a Jacobian's cost in iterations plus the two it takes after
+        (3 for GLRK1-none, 5 for GLRK2-symmetric, 9 for GLRK6-symmetric on d = 4).  It saves
+        Jacobians (GLRK2- and SRK3-symmetric with the carried factors 1.1-1.4x faster in lanes),
+        but a lane then stops at tol with factors that contract by up to 0.5 an iteration, so
+        each step leaves an error of a few ulps in the same direction and round-off grows about
+        ten times faster (docs/benchmarks.md): not the default (``"defects"`` only)
     jacobian_age : ... once the carried factors are at least this many steps old (default 1:
         every trusted step; 2 takes about half the Jacobians for about one more iteration a step,
         but lanes in lockstep factorise whenever one of them asks, so it pays only where the
@@ -289,9 +291,9 @@ class Tolerances:
     predictor: str = "defects"
     depth: int = 8
     trust: float = 1e-3
-    trust_max_unknowns: int = 0
+    trust_max_unknowns: int = 16
     refresh_floor: float = 1e-12
-    refresh_horizon: int = -1
+    refresh_horizon: int = 0
     jacobian_age: int = 1
 
     def __post_init__(self):
@@ -319,7 +321,8 @@ class Tolerances:
             raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
 
     def horizon(self, unknowns):
-        """The refresh horizon for a pair of ``unknowns`` Newton unknowns (``refresh_horizon``)."""
+        """The refresh horizon for a pair of ``unknowns`` Newton unknowns (``refresh_horizon``;
+        0: none)."""
         return 2 + -(-int(unknowns) // 4) if self.refresh_horizon < 0 else self.refresh_horizon
 
     def array(self, double_double=False, unknowns=0) -> np.ndarray:

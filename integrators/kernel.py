@@ -1075,15 +1075,16 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
     """Advance the live lanes by one step; returns the lanes whose step is over (taken, or broken down).
 
     The guess (:func:`_guess`): the last step's stages extrapolated, corrected by the last steps'
-    defects (``cfg.depth`` of them).  With ``cfg.carry`` (the engine's rule before the predictor
-    learned from its defects) a step is tried from up to three starts before a lane breaks down:
-    (0) the guess with the Newton factors carried from the last step; if that fails, (1) the same
-    guess with a Jacobian taken there (only when try 0 used carried factors); then (2) h·q̇(q_n) at
-    every stage, μ = 0, with a Jacobian taken there.  Without it (the default): (0) the guess with a
-    Jacobian taken there; (1) the uncorrected base guess with the carried factors (a Jacobian there
-    when none are carried); (2) as above.  A first step starts at (2).  A lane whose last try fails
-    (Newton does not converge, a value is not finite, q leaves the domain) is frozen at its last good
-    state with its breakdown time set to ``t_next``.  Each further try is the lane's next call of this
+    defects (``cfg.depth`` of them; none under ``predictor="extrapolate"``).  A step is tried from
+    up to three starts before a lane breaks down: (0) the guess, with a Jacobian taken there where
+    the lane trusts it (``F.trust``; never where ``cfg.trust`` < 0: the old rule, and pairs above
+    ``Tolerances.trust_max_unknowns``), else with the factors carried from the last step; if that
+    fails, (1) the uncorrected base guess with the other choice (a Jacobian there when none are
+    carried; under the old rule the base is the guess, so this is its "same guess, fresh
+    Jacobian"); then (2) h·q̇(q_n) at every stage, μ = 0, with a Jacobian taken there.  A first
+    step starts at (2).  A lane whose last try fails (Newton does not converge, a value is not
+    finite, q leaves the domain) is frozen at its last good state with its breakdown time set to
+    ``t_next``.  Each further try is the lane's next call of this
     function (``F.retry``: the next try's number, its step not over), made beside its neighbours'
     next steps instead of in a pass of its own in which they would wait; it computes what a pass of
     its own would."""

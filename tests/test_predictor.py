@@ -50,29 +50,32 @@ FRESH = integrators.Tolerances(trust_max_unknowns=64)      # a Jacobian at every
 
 
 # (pair, points, iterations bound, Newton work bound against the old rule's): one point per lane,
-# so that the Jacobians are the points'.  Measured 2026-11-27: GLRK2-symmetric 4.61 iterations,
-# work 4.71 against 7.82 (0.60); GLRK2-standard 6.61, 9.04 against 11.31 (0.80); SRK3-symmetric
-# 5.17, 5.25 against 8.45 (0.62); GLRK4-symmetric 3.58, 3.69 against 6.57 (0.56); GLRK6-symmetric
-# 3.89, 4.04 against 7.05 (0.57); one orbit of GLRK4 / GLRK6: 3.78 / 4.16, work 0.55 / 0.53.
-WORK = [("GLRK2", "symmetric", 32, 5.0, 0.65), ("GLRK2", "standard", 32, 7.0, 0.85),
-        ("SRK3", "symmetric", 32, 5.5, 0.68), ("GLRK4", "symmetric", 32, 4.0, 0.62),
-        ("GLRK6", "symmetric", 32, 4.5, 0.62), ("GLRK4", "symmetric", 1, 4.0, 0.6),
+# so that the Jacobians are the points'.  Measured 2026-11-27, with a Jacobian at each trusted
+# guess up to 16 unknowns: GLRK2-symmetric 2.40 iterations, work 5.70 against 7.82 (0.73);
+# GLRK2-standard 4.38, 8.99 against 11.31 (0.79); SRK3-symmetric 2.46, 6.72 against 8.45 (0.80);
+# with the carried factors above 16: GLRK4-symmetric 3.51, 3.81 against 6.57 (0.58);
+# GLRK6-symmetric 3.81, 4.07 against 7.05 (0.58); one orbit of GLRK4 / GLRK6: 3.60 / 3.92, work
+# 0.57 / 0.52.
+WORK = [("GLRK2", "symmetric", 32, 3.5, 0.76), ("GLRK2", "standard", 32, 5.0, 0.83),
+        ("SRK3", "symmetric", 32, 3.5, 0.83), ("GLRK4", "symmetric", 32, 4.0, 0.62),
+        ("GLRK6", "symmetric", 32, 4.5, 0.62), ("GLRK4", "symmetric", 1, 4.0, 0.62),
         ("GLRK6", "symmetric", 1, 4.5, 0.6)]
 
 
 @pytest.mark.parametrize("tab,proj,n,its_bound,work_bound", WORK)
 def test_newton_work_per_step_on_the_benchmark_protocol(tab, proj, n, its_bound, work_bound):
     """guiding_centre_symmetric, h = 10, points near the default loop, 50 steps from the start (the
-    first steps' shorter history included).  The default keeps the carried factors (the refresh
-    floor and horizon leave about one Jacobian in 50 steps), which costs fewer flops than a Jacobian
-    at each guess: the Newton work drops to 0.53-0.80 of the old rule's, the iterations to 3.6-6.6
-    (before: 6.50, 8.48, 6.46, 5.60, 4.86; one orbit 5.59 and 4.87)."""
+    first steps' shorter history included).  The default takes a Jacobian at each trusted guess
+    in pairs of at most 16 unknowns (GLRK2, SRK3: the issue's iteration bounds) and keeps the
+    carried factors above (GLRK4, GLRK6: a Jacobian there costs 5.4 and 7.6 iterations); the
+    refresh floor spares the Jacobians the old rule took on round-off.  The Newton work drops to
+    0.52-0.80 of the old rule's (before: 6.50, 8.48, 6.46, 5.60, 4.86 iterations; one orbit 5.59
+    and 4.87)."""
     q0 = protocol_points(n) if n > 1 else protocol_points(3)[:1]
     its, jacs, work = newton_per_step(tab, proj, q0, lanes=1)
     old = newton_per_step(tab, proj, q0, OLD, lanes=1)
     assert its <= its_bound and its < old[0]
     assert work <= work_bound * old[2]
-    assert jacs <= (1.1 if proj == "standard" else 0.1)      # (standard: the projection's solve's own d x d)
 
 
 @pytest.mark.parametrize("tab,proj,n,bound", [("GLRK2", "symmetric", 32, 3.5), ("GLRK2", "standard", 32, 5.0),
@@ -183,14 +186,14 @@ def test_tolerances_check_the_predictor_settings():
 
 
 def test_the_lanes_report_their_jacobians():
-    """LaneUse.jacobians (GLRK2-symmetric, 64 points, 16 lanes, 50 steps): the default keeps the
-    carried factors, 8 Jacobians in 200 group steps (the first step's and a few refreshes); with a
-    Jacobian at each trusted guess one a group step; and Tolerances(jacobian_age=2) then lets a
+    """LaneUse.jacobians (GLRK2-symmetric, 64 points, 16 lanes, 50 steps): the default takes a
+    Jacobian at each trusted guess, one a group step; with the carried factors
+    (trust_max_unknowns=0) a lane's refresh still factorises its group, 0.96 a group step; and Tolerances(jacobian_age=2) then lets a
     lane whose factors are one step old keep them (in lockstep a group still factorises when any
     lane asks: on 10⁴ points near the loop 0.51 a group step, on these 64 it stays 1.00)."""
     sy = integrators.system("guiding_centre_symmetric")
     q0 = protocol_points(64)
-    for tol, lo, hi in ((None, 0.0, 0.1), (FRESH, 0.9, 1.1)):
+    for tol, lo, hi in ((integrators.Tolerances(trust_max_unknowns=0), 0.5, 1.1), (None, 0.9, 1.1)):
         eng = integrators.Engine(sy, integrators.tableau("GLRK2"), "symmetric", 10.0, tolerances=tol)
         st = eng.state(q0)
         use = eng.advance(st, 1, 50, lanes=kernel.WIDE)
@@ -199,17 +202,16 @@ def test_the_lanes_report_their_jacobians():
     use = eng.advance(one, 1, 50, lanes=1)
     assert 0.9 * 50 <= use.jacobians <= 1.1 * 50 and use.rounds == 50
     aged = integrators.Engine(sy, integrators.tableau("GLRK2"), "symmetric", 10.0,
-                              tolerances=integrators.Tolerances(trust_max_unknowns=64, jacobian_age=2))
+                              tolerances=integrators.Tolerances(jacobian_age=2))
     one = aged.state(q0[:1])
     use = aged.advance(one, 1, 50, lanes=1)
     assert use.jacobians <= 0.7 * 50 and one.iterations.sum() / 50 <= 3.5
 
 
-def test_the_refresh_floor_and_horizon_spare_jacobians():
-    """Without the floor and the horizon (Tolerances(refresh_floor=0, refresh_horizon=0)) the carried
-    factors are refreshed whenever an iteration contracts by less than 0.01, also where the update
-    is round-off: GLRK6-symmetric, one orbit, 0.4 Jacobians a step; with them under 0.05."""
+def test_the_refresh_floor_spares_jacobians():
+    """Without the floor (Tolerances(refresh_floor=0)) the carried factors are refreshed whenever an
+    iteration contracts by less than 0.01, also where the update is round-off: GLRK6-symmetric, one
+    orbit, 0.4 Jacobians a step; with it 0.04."""
     q0 = protocol_points(3)[:1]
-    bare = integrators.Tolerances(refresh_floor=0.0, refresh_horizon=0)
-    assert newton_per_step("GLRK6", "symmetric", q0, bare, lanes=1)[1] > 0.2
-    assert newton_per_step("GLRK6", "symmetric", q0, lanes=1)[1] < 0.05
+    assert newton_per_step("GLRK6", "symmetric", q0, integrators.Tolerances(refresh_floor=0.0), lanes=1)[1] > 0.2
+    assert newton_per_step("GLRK6", "symmetric", q0, lanes=1)[1] < 0.1
