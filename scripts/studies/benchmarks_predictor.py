@@ -4,19 +4,26 @@
     python scripts/studies/benchmarks_predictor.py [--points 10000] [--out docs/figures/benchmark_predictor.json]
     python scripts/studies/benchmarks_predictor.py --flops   # only the flop counts of an iteration and a Jacobian
 
-Both rules run in this process on the same points, one thread, alternating which goes first:
-``Tolerances(predictor="extrapolate")`` (the last step's stages extrapolated, the factors carried
-from the last step: the engine's bits before) and the default ``Tolerances()`` (that guess corrected
-by the extrapolated defects of the last steps, a Jacobian at the guess where the last guess was
-good), and the same with ``jacobian_age=2`` (a trusted step keeps factors one step old).
+The rules run in this process on the same points, one thread, alternating which goes first:
+``Tolerances(predictor="extrapolate")`` ("before": the last step's stages extrapolated, the factors
+carried from the last step, refreshed after an iteration that contracted by less than 0.01: the
+engine's bits before issue 55), the default ``Tolerances()`` ("defects": that guess corrected by
+the extrapolated defects of the last steps, a Jacobian at the guess in pairs of at most 16 Newton
+unknowns and the carried factors above, refreshed only above the refresh floor) and
+the other choice of Jacobian ("other": ``Tolerances(trust_max_unknowns=0)``, the carried factors,
+for the pairs of at most 16 unknowns, where the default takes a Jacobian at every guess that was
+good to 10⁻³ the step before; ``Tolerances(trust_max_unknowns=64)``, that Jacobian, above, where
+the default carries the factors).
 guiding_centre_symmetric, h = 10:
 
-* iterations: mean Newton iterations (residual evaluations) per point-step, 32 points near the
-  default loop, 50 steps from the start (the first steps, with a shorter history, included), and
-  one orbit (W = 1) of GLRK4/6-symmetric;
+* iterations: mean Newton iterations (residual evaluations) and Jacobians per point-step, 32 points
+  near the default loop, 50 steps from the start (the first steps, with a shorter history,
+  included), and one orbit, one point per lane, and the Newton work: iterations + Jacobians × the
+  pair's Jacobian in iterations (the flop counts below);
 * speed: point-steps per second of 10⁴ points near the loop and 10⁴ spread over its bounding box,
   50 steps from the start in one call, best of 2 in each of 2 rounds; one orbit, 2,000 steps;
 * robustness: iterations and breakdowns at larger steps and on two other systems;
+* drift: how far 64 loop points end from the old rule's after 300 steps (round-off, not speed);
 * flops per point-step as coded: Newton iterations × the residual-and-solve count of
   scripts/studies/engine_lanes.py, plus Jacobians × a count of the Jacobian's extra work (second
   derivatives, contractions, assembly, LU), both read off the generated point function and the
@@ -39,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts" / "studies"))
 from engine_lanes import _ops, flops_per_iteration  # noqa: E402  (the count of one Newton iteration)
 RULES = {"before": integrators.Tolerances(predictor="extrapolate"), "defects": integrators.Tolerances(),
-         "age2": integrators.Tolerances(jacobian_age=2)}
+         "other": None}
 PAIRS = (("GLRK1", "none"), ("GLRK2", "symmetric"), ("GLRK2", "standard"), ("SRK3", "symmetric"),
          ("GLRK4", "symmetric"), ("GLRK6", "symmetric"))
 
@@ -52,7 +59,12 @@ def point_sets(n):
 
 
 def engine(sy, tab, proj, h, rule):
-    return integrators.Engine(sy, integrators.tableau(tab), proj, h, tolerances=RULES[rule])
+    tol = RULES[rule]
+    if rule == "other":                   # the choice of Jacobian the default does not make for this pair
+        nz = integrators.Engine(sy, integrators.tableau(tab), proj, h).nz
+        fresh = nz <= integrators.Tolerances().trust_max_unknowns
+        tol = integrators.Tolerances(trust_max_unknowns=0 if fresh else 64)
+    return integrators.Engine(sy, integrators.tableau(tab), proj, h, tolerances=tol)
 
 
 def iterations(sy):
@@ -62,12 +74,14 @@ def iterations(sy):
         row = dict(pair=f"{tab}-{proj}")
         for rule in RULES:
             e = engine(sy, tab, proj, 10.0, rule)
-            st = e.state(q0)
-            e.advance(st, 1, 50)
-            one = e.state(q0[:1])
-            e.advance(one, 1, 50, lanes=1)
-            row[rule] = st.iterations.sum() / st.steps.sum()
-            row[rule + "_orbit"] = one.iterations.sum() / one.steps.sum()
+            cost = jacobian_flops(sy, e.tableau, e) / flops_per_iteration(sy, e.tableau, e)
+            for key, pts in (("", q0), ("_orbit", q0[:1])):
+                st = e.state(pts)
+                use = e.advance(st, 1, 50, lanes=1)
+                its, jac = st.iterations.sum() / st.steps.sum(), use.jacobians / st.steps.sum()
+                row[rule + key] = its
+                row[rule + key + "_jacobians"] = jac
+                row[rule + key + "_work"] = its + cost * jac
         rows.append(row)
         print(row, flush=True)
     return rows
@@ -125,13 +139,36 @@ def speed(sy, n):
             row[rule + "_flops"] = (flops_per_iteration(sy, e.tableau, e) * row[rule + "_iterations"]
                                     + jacobian_flops(sy, e.tableau, e) * row[rule + "_jacobians"])
         row["ratio"] = row["defects"] / row["before"]
-        row["ratio_age2"] = row["age2"] / row["before"]
+        row["ratio_other"] = row["other"] / row["before"]
         rows.append(row)
         print(f"{row['pair']:18s} {name:5s} before {row['before']:11,.0f}  defects {row['defects']:11,.0f} "
-              f"{row['ratio']:.2f}x  age2 {row['ratio_age2']:.2f}x  it. {row['before_iterations']:.2f} -> "
-              f"{row['defects_iterations']:.2f} / {row['age2_iterations']:.2f}  J/step {row['before_jacobians']:.2f} -> "
-              f"{row['defects_jacobians']:.2f} / {row['age2_jacobians']:.2f}  flop/step {row['before_flops']:.0f} -> "
-              f"{row['defects_flops']:.0f} / {row['age2_flops']:.0f}", flush=True)
+              f"{row['ratio']:.2f}x  other {row['ratio_other']:.2f}x  it. {row['before_iterations']:.2f} -> "
+              f"{row['defects_iterations']:.2f} / {row['other_iterations']:.2f}  J/step {row['before_jacobians']:.2f} -> "
+              f"{row['defects_jacobians']:.2f} / {row['other_jacobians']:.2f}  flop/step {row['before_flops']:.0f} -> "
+              f"{row['defects_flops']:.0f} / {row['other_flops']:.0f}", flush=True)
+    return rows
+
+
+def drift():
+    """Round-off, not speed: 64 points on the default loop, 300 steps, max |q − q_before| for the
+    default, with a Jacobian at every trusted guess, and with the refresh horizon
+    (``refresh_horizon=-1``, the carried factors everywhere: the rule measured and not kept)."""
+    q0 = invariants.loop("guiding_centre", 64)
+    sy = integrators.system("guiding_centre_symmetric")
+    rules = {"before": RULES["before"], "defects": RULES["defects"],
+             "fresh": integrators.Tolerances(trust_max_unknowns=64),
+             "horizon": integrators.Tolerances(trust_max_unknowns=0, refresh_horizon=-1)}
+    rows = []
+    for tab, proj in (("GLRK1", "symmetric"), ("GLRK2", "symmetric"), ("GLRK2", "standard"), ("SRK3", "midpoint")):
+        q = {}
+        for rule, tol in rules.items():
+            e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
+            st = e.state(q0)
+            e.advance(st, 1, 300)
+            q[rule] = st.q
+        row = dict(pair=f"{tab}-{proj}", **{r: float(np.max(np.abs(q[r] - q["before"]))) for r in rules if r != "before"})
+        rows.append(row)
+        print(row, flush=True)
     return rows
 
 
@@ -173,7 +210,7 @@ def main():
         return
     t0 = time.perf_counter()
     out = dict(date=time.strftime("%Y-%m-%d"), machine=platform.processor() or platform.machine(),
-               iterations=iterations(sy), speed=speed(sy, a.points), robustness=robustness())
+               iterations=iterations(sy), speed=speed(sy, a.points), robustness=robustness(), drift=drift())
     out["seconds"] = time.perf_counter() - t0
     Path(a.out).write_text(json.dumps(out, indent=1, default=float))
     print(f"wrote {a.out} ({out['seconds']:.0f} s)")

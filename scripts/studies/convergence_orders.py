@@ -256,6 +256,18 @@ Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
   orders before it 3.9–4.0; long double 4.12). Issue 55's predictor moved these last bits: before
   it the two errors happened to be 4.4e-16 and 8.8e-16, under the floors, and the fits read 5.99 and
   3.90.
+* **Six Lobatto cells moved by round-off with the refresh floor (issue 55's second step).** The
+  engine no longer takes a Jacobian after an update below 1e-12, so the last bits of every run
+  moved, and where a series ends at its floor the fit moved with them: LobIIIA4 + symmetric's
+  solution order 5.98 → −0.46 (errors at h = 2⁻⁶ … 2⁻⁹: 6.8e-14, 1.3e-14, 1.1e-14, 2.6e-14, where
+  they were 7.2e-14, 5.8e-15, 5.9e-15, 3.9e-15: all at the solution floor of 1e-14),
+  LobIIIB4 + standard's 6.02 → −0.97 (2.2e-14 … 8.5e-14 against 3.3e-15 … 1.1e-13), LobIIIB4 +
+  midpoint's 3.79 → 1.21 (1.7e-14 and 2.6e-14 at the two smallest h against 1.2e-14 and 3.6e-15),
+  LobIIIB4 + none's 4.03 → 3.49 (last error 1.3e-14), LobIIIA3 + symmetric's energy 4.00 → 3.19
+  and LobIIIA3 + midpoint's 4.00 → 3.46 (last errors 2.8e-15 and 2.9e-15 against the energy floor
+  of 2e-15). Every error above 100 times its floor is within 3 % of what it was (the largest move:
+  LobIIIA3 + midpoint's solution error 1.47e-12 → 1.43e-12), and the long-double orders of these
+  pairs are unchanged.
 * **No reference floor any more; the floor was double precision, and long double lowers it 2,048×.** The mpmath reference agrees with a
   36-digit run to the last bit of a double, so every solution error above 1e-14 is the method's (the
   DOP853 reference used before was off by 4.1e-14, which hid GLRK4's order: 7.4–7.5 then, 7.95–8.01
