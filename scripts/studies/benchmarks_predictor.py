@@ -3,6 +3,8 @@
 
     python scripts/studies/benchmarks_predictor.py [--points 10000] [--out docs/figures/benchmark_predictor.json]
     python scripts/studies/benchmarks_predictor.py --flops   # only the flop counts of an iteration and a Jacobian
+    python scripts/studies/benchmarks_predictor.py --paper   # only the engine on paper_poincare's points
+    python scripts/studies/benchmarks_predictor.py --floor   # only Jacobians of one orbit against the refresh floor
 
 The rules run in this process on the same points, one thread, alternating which goes first:
 ``Tolerances(predictor="extrapolate")`` ("before": the last step's stages extrapolated, the factors
@@ -172,6 +174,50 @@ def drift():
     return rows
 
 
+def paper_points():
+    """The engine alone on half the points of paper_poincare (every other point of the 2,000-point
+    loop and the 100 × 100 surface), its 15 pairs, 200 steps in calls of 10, one thread: seconds
+    and iterations per point-step under the old rule, the default and the carried factors."""
+    sy = integrators.system("guiding_centre_symmetric")
+    pts = np.concatenate([invariants.loop("guiding_centre", 2000),
+                          invariants.surface("guiding_centre", 100, 100).reshape(-1, 4)])[::2]
+    rules = {"before": RULES["before"], "defects": RULES["defects"],
+             "carried": integrators.Tolerances(trust_max_unknowns=0)}
+    total = dict.fromkeys(rules, 0.0)
+    for tab in ("GLRK1", "GLRK2", "SRK3"):
+        for proj in ("none", "standard", "symmetric", "symplectic", "midpoint"):
+            row = []
+            for rule, tol in rules.items():
+                e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
+                e.warm(pts)
+                st = e.state(pts)
+                t = time.perf_counter()
+                for k in range(20):
+                    e.advance(st, 1 + 10 * k, 10)
+                total[rule] += time.perf_counter() - t
+                row.append(f"{rule} {st.iterations.sum() / st.steps.sum():.2f} it.")
+            print(f"{tab}-{proj}: " + ", ".join(row), flush=True)
+    print("seconds, all 15 pairs: " + ", ".join(f"{r} {v:.2f}" for r, v in total.items()))
+    return total
+
+
+def floor_orbit():
+    """One orbit of GLRK4- and GLRK6-symmetric near the loop, 300 steps: Jacobians and iterations per step
+    with the refresh floor at 0 (the old refresh rule), 1e-14, 1e-13 and 1e-12 (the default)."""
+    sy = integrators.system("guiding_centre_symmetric")
+    q0 = point_sets(3)["loop"][:1]
+    for floor in (0.0, 1e-14, 1e-13, 1e-12):
+        row = []
+        for tab in ("GLRK4", "GLRK6"):
+            e = integrators.Engine(sy, integrators.tableau(tab), "symmetric", 10.0,
+                                   tolerances=integrators.Tolerances(refresh_floor=floor))
+            st = e.state(q0)
+            use = e.advance(st, 1, 300, lanes=1)
+            row.append(f"{tab}-symmetric {st.iterations.sum() / st.steps.sum():.2f} it., "
+                       f"{use.jacobians / st.steps.sum():.2f} Jacobians a step")
+        print(f"refresh_floor {floor:g}: " + "; ".join(row), flush=True)
+
+
 def robustness():
     rng = np.random.default_rng(1)
     cases = [("guiding_centre_symmetric", h, invariants.loop("guiding_centre", 128)
@@ -199,9 +245,17 @@ def main():
     ap.add_argument("--points", type=int, default=10000)
     ap.add_argument("--out", default=str(ROOT / "docs/figures/benchmark_predictor.json"))
     ap.add_argument("--flops", action="store_true", help="print the flop counts as coded and stop")
+    ap.add_argument("--paper", action="store_true", help="the engine alone on paper_poincare's points, and stop")
+    ap.add_argument("--floor", action="store_true", help="Jacobians of one orbit against the refresh floor, and stop")
     a = ap.parse_args()
     set_threads(1)
     sy = integrators.system("guiding_centre_symmetric")
+    if a.paper:
+        paper_points()
+        return
+    if a.floor:
+        floor_orbit()
+        return
     if a.flops:
         for tab, proj in PAIRS:
             e = engine(sy, tab, proj, 10.0, "defects")
