@@ -239,7 +239,10 @@ class State:
 class Tolerances:
     """Newton's stopping rule in the compiled engine, as runtime data (one compilation for any values).
 
-    tol : converged when max |δ|/scale ≤ tol (default 4 eps)
+    tol : converged when max |δ|/scale ≤ tol (default 4 eps); under ``predictor="defects"`` not
+        before the second iteration, so that the guess itself, often within tol at small steps,
+        is never taken as the solution (its extrapolation error, a few ulps of one sign a step,
+        grew the round-off of long runs up to twentyfold: docs/benchmarks-history.md)
     stall : ... or when ≤ stall and the update no longer halves (the round-off floor; default 1e-10)
     stall_complex : the same for the audit's complex-step derivatives (default 1e-13)
     maxiter : iterations before a step counts as failed (default 40)
@@ -253,9 +256,11 @@ class Tolerances:
         :func:`predictor`)
     depth : how many steps' defects ``"defects"`` keeps, 1 … kernel.DEPTH (default 8); each step
         uses the order that would have done best on the step before
-    trust : a step whose last guess was off by at most this (relative to max(|q|, 1)) starts its
-        Newton from a Jacobian at the guess; the others from the factors carried from the last step
-        (default 1e-3; ``"defects"`` only: the other predictors always carry them)
+    trust : a step whose last guess was off by at most this (relative to max(|q|, 1)), and by
+        more than the refresh floor, starts its Newton from a Jacobian at the guess; the others
+        from the factors carried from the last step (default 1e-3; ``"defects"`` only: the other
+        predictors always carry them).  From a guess within the floor the carried factors converge
+        in the two iterations every step takes, whatever their age
     trust_max_unknowns : ... and only in pairs of at most this many Newton unknowns (default 16:
         GLRK1, GLRK2 and SRK3 with any projection on d = 4); a larger LU costs more than the
         iterations it saves, so those pairs keep the carried factors (docs/benchmarks.md)
@@ -275,6 +280,16 @@ class Tolerances:
         every trusted step; 2 takes about half the Jacobians for about one more iteration a step,
         but lanes in lockstep factorise whenever one of them asks, so it pays only where the
         group's points keep in phase: docs/benchmarks.md)
+    jacobian_every : ... and only at the steps whose number is a multiple of this; at the others
+        the factors of the last due step are carried (default 1: every step).  A schedule by step
+        number keeps the lanes of a group factorising together, which a point's own history does
+        not: 2 ran GLRK2- and SRK3-symmetric 1.1-1.2x faster in lanes on the guiding centre before
+        the recurrence, but one orbit in the tokamak field 13 % slower (its carried factors then
+        need refreshing within the step): docs/benchmarks.md
+    recurrence : the coefficients (0 … kernel.RECURRENCE, default 4; 0: none) of a linear
+        recurrence fitted to the last DEPTH defects, whose prediction competes with the
+        polynomial orders (``"defects"`` only; :func:`integrators.kernel._recurrence`): it follows
+        uniform rotations and the parasitic two-step wiggles that no polynomial follows
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
@@ -295,9 +310,11 @@ class Tolerances:
     refresh_floor: float = 1e-12
     refresh_horizon: int = 0
     jacobian_age: int = 1
+    jacobian_every: int = 1
+    recurrence: int = 4
 
     def __post_init__(self):
-        from .kernel import DEPTH
+        from .kernel import DEPTH, RECURRENCE
         if self.predictor not in PREDICTORS:
             raise ValueError(f"Tolerances.predictor must be one of {', '.join(PREDICTORS)}, got {self.predictor!r}")
         if isinstance(self.depth, bool) or not isinstance(self.depth, (int, np.integer)) or \
@@ -310,6 +327,13 @@ class Tolerances:
         if isinstance(self.jacobian_age, bool) or not isinstance(self.jacobian_age, (int, np.integer)) or \
                 not 1 <= self.jacobian_age <= 255:
             raise ValueError(f"Tolerances.jacobian_age must be an integer from 1 to 255, got {self.jacobian_age!r}")
+        if isinstance(self.jacobian_every, bool) or not isinstance(self.jacobian_every, (int, np.integer)) or \
+                not 1 <= self.jacobian_every <= 255:
+            raise ValueError(f"Tolerances.jacobian_every must be an integer from 1 to 255, got {self.jacobian_every!r}")
+        if isinstance(self.recurrence, bool) or not isinstance(self.recurrence, (int, np.integer)) or \
+                not 0 <= self.recurrence <= RECURRENCE:
+            raise ValueError(f"Tolerances.recurrence must be an integer from 0 (none) to {RECURRENCE}, "
+                             f"got {self.recurrence!r}")
         if isinstance(self.trust_max_unknowns, bool) or not isinstance(self.trust_max_unknowns, (int, np.integer)) \
                 or self.trust_max_unknowns < 0:
             raise ValueError("Tolerances.trust_max_unknowns must be an integer ≥ 0, "
@@ -342,7 +366,8 @@ class Tolerances:
                       velocity=1.0 if self.predictor == "velocity" else 0.0,
                       depth=float(self.depth) if self.predictor == "defects" else 0.0,
                       trust=self.trust if fresh else -1.0,
-                      age=float(self.jacobian_age))
+                      age=float(self.jacobian_age), every=float(self.jacobian_every),
+                      least=2.0 if defects else 1.0, rec=float(self.recurrence) if defects else 0.0)
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 
@@ -450,6 +475,9 @@ class Engine:
 
     def advance(self, state, first, nsteps, t0=0.0, block=BLOCK, lanes=None):
         """Steps number first … first + nsteps − 1 (step k aims at t0 + k·h) for every live point.
+        The numbers matter beyond the times: the default takes its Jacobians by a schedule of step
+        numbers (``Tolerances.jacobian_every``), so a run split into calls gives the bits of one
+        call when each call goes on from the last one's number.
 
         ``lanes``: W, points advanced together in SIMD lanes (1, kernel.LANES or kernel.WIDE; None:
         :meth:`lanes_for` the state's points).  Any choice gives the same bits.  Returns the :class:`LaneUse` of the call

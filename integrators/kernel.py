@@ -60,6 +60,8 @@ WIDE_NZ = 12            # lanes, whose independent chains hide each other's late
 #                         above 12 unknowns 16 lanes' scratch outgrows the L1 cache and lose
 #                         (docs/benchmarks-history.md, "Sixteen lanes for small Newton systems").
 DEPTH = 8               # the stage predictor's memory: the defects of the last DEPTH steps' guesses
+RECURRENCE = 4          # the most coefficients of the defects' fitted linear recurrence (_recurrence)
+AR = float(DEPTH + 1)   # the order (F.ordy, F.ordl) that stands for the recurrence's prediction
 #                         (:func:`_guess`; how many a pair uses is Newton.depth, run-time data)
 WIDE_POINTS = 1024      # ... and only for calls of at least this many points: a second width is a
 #                         second compilation of the kernel (~35 s a dimension), paid where a run is
@@ -149,6 +151,8 @@ Scratch = namedtuple("Scratch", [
     # the predictor: this step's base guess (stages, Λ, μ) and the last steps' defects from theirs
     # (the guess itself, ``guess``, has the same layout: s·d stages, then Λ, then μ)
     "base", "D",
+    # the recurrence: the last DEPTH defects, the normal equations of its fit, its prediction of δ
+    "dh", "gram", "ar",
     # the points' own state while the group is advanced; jz, jq, jl: where its factors lu were taken
     "q", "p", "lam", "qc", "pc", "Y", "mu", "lu", "jz", "jq", "jl",
     "size"])
@@ -196,14 +200,15 @@ def layout(s, d, nz):
         pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
         **dict.fromkeys(D_VECTORS, d),
         z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd + 2 * d,
-        base=sd + 2 * d, D=DEPTH * (sd + 2 * d),
+        base=sd + 2 * d, D=DEPTH * (sd + 2 * d), dh=DEPTH * d, gram=RECURRENCE * (RECURRENCE + 1),
+        ar=sd + 2 * d,
         q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz, jz=nz, jq=d, jl=d))
     F = _offsets(Flags, dict(dict.fromkeys(Flags._fields[:-1], 1), scale=nz, pscale=d))
     IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d, pt=1))
     return S, F, IP
 
 
-Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age")
+Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age every least rec")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
@@ -215,7 +220,10 @@ test);
 adds h·q̇(q_n) to the stage predictor; ``depth`` (0 … DEPTH) how many of the last steps' defects
 correct the guess (:func:`_guess`); a step whose last guess was off by at most ``trust`` (relative)
 starts its Newton from a Jacobian at the guess instead of the factors carried from the last step
-(negative: never) once those factors are ``age`` steps old."""
+(negative: never) once those factors are ``age`` steps old, at the steps whose number is a multiple of
+``every`` (so the lanes of a group take theirs together); a lane converges at its ``least``-th
+iteration at the earliest (2 with the defects: the guess itself is never the solution); ``rec``
+coefficients (0: none) of the defects' fitted linear recurrence (:func:`_recurrence`)."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
                                         "lu piv have_lu jac_z jac_q jac_lam defects orders")
@@ -252,7 +260,7 @@ def _records(lay):
 
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11])
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14])
 
 
 @njit(inline='always', **_OPTS)
@@ -706,9 +714,13 @@ def _update(z, r, done, scale, nz, f, F):
 
 
 @njit(inline='always', **_OPTS)
-def _judge(f, F, tol, stall, refresh, floor, horizon):
+def _judge(f, F, tol, stall, refresh, floor, horizon, least):
     """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol,
-    or ≤ stall once the update stops halving) or on, with a fresh Jacobian next time if this
+    or ≤ stall once the update stops halving, from its ``least``-th iteration on: with the defects'
+    guess 2, because at small steps that guess is often within tol already, and taking it, not the
+    iterate after it, left its extrapolation error, a few ulps of the same sign, in every step:
+    SRK3-standard on point vortices at h = 2⁻¹³, 16,384 steps, momentum off by 1.0·10⁻¹³ against
+    the old rule's 4.6·10⁻¹⁵) or on, with a fresh Jacobian next time if this
     iteration contracted by θ > ``refresh``, its update was larger than ``floor`` (an update a few
     thousand ulps small measures round-off, not the factors: a Jacobian there was the engine's
     largest waste on high-order pairs, docs/benchmarks.md) and θ^horizon·|δ| > tol: the factors
@@ -721,7 +733,7 @@ def _judge(f, F, tol, stall, refresh, floor, horizon):
     failed = mor(mor(ld(f, F.nan) != 0.0, ld(f, F.finite) == 0.0), mnot(np.isfinite(sz)))
     theta = sel(np.isfinite(prev), sz / prev, np.inf)
     slow = mand(np.isfinite(theta), theta > 0.5)
-    converged = mand(mnot(failed), mor(sz <= tol, mand(sz <= stall, slow)))
+    converged = mand(mand(mnot(failed), mor(sz <= tol, mand(sz <= stall, slow))), ld(f, F.its) >= least)
     ends = mand(on, mor(failed, converged))
     goes = mand(on, mnot(ends))
     st(f, F.done, sel(ends, 1.0, ld(f, F.done)))
@@ -790,7 +802,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
         lu_solve(LU, piv, r, nz)                  # r is now −δ
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         _update(z, r, done, scale, nz, f, F)
-        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh, cfg.floor, cfg.horizon)
+        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh, cfg.floor, cfg.horizon, cfg.least)
     for l in range(W):                            # lanes out of iterations
         if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)
@@ -1005,14 +1017,82 @@ def _base(ev, P, d, s, nl, fresh, g):
 
 
 @njit(inline='always', **_OPTS)
-def _guess(ordy, ordl, depth, nb, sd, w, S):
+def _recurrence(m, nb, d, w, S):
+    """The defects' next value from a linear recurrence fitted to the last DEPTH of them, into ``ar``.
+
+    δ_j ≈ c_0 δ_{j−1} + … + c_{m−1} δ_{j−m} is fitted by least squares to the first stage's d
+    components of the DEPTH − m newest defects (normal equations with a ridge of 10⁻¹⁴ of their
+    trace: the defects of a smooth motion are nearly dependent), and then predicts every component:
+    δ_{n+1} = Σ_a c_a δ_{n−a} = Σ_k w_k T_k with w_k = (−1)^k Σ_{a ≥ k} c_a C(a, k), straight from
+    the difference table.  A polynomial extrapolation is such a recurrence with fixed binomial
+    coefficients; a fitted one also follows a uniform rotation (the symmetric guiding centre, to
+    round-off) and the parasitic two-step wiggle of the unprojected midpoint rule (GLRK1-none: 10⁻⁸
+    where no polynomial gets below 10⁻⁴).  The first stage's defects come back from their
+    differences in ``dh`` (newest first).  Lanes without a full table get a prediction too; the
+    caller does not choose it."""
+    D, dh, G, ar = at(w, S.D), at(w, S.dh), at(w, S.gram), at(w, S.ar)
+    for k in range(DEPTH):
+        for i in range(d):
+            st(dh, k * d + i, ld(D, k * nb + i))
+    for j in range(1, DEPTH):                    # after pass j, dh[j + t] = ∇^t δ_{n−j}: so dh[j] = δ_{n−j}
+        for k in range(DEPTH - 1, j - 1, -1):
+            for i in range(d):
+                st(dh, k * d + i, ld(dh, (k - 1) * d + i) - ld(dh, k * d + i))
+    rows = DEPTH - m
+    mm = m + 1                                   # G: m rows of m coefficients and the right-hand side
+    for a in range(m):
+        for b in range(a, mm):
+            x0, y0 = (a + 1) * d, (b + 1) * d if b < m else 0
+            acc = ld(dh, x0) * ld(dh, y0)
+            for j in range(rows):
+                for i in range(1 if j == 0 else 0, d):
+                    acc = acc + ld(dh, x0 + j * d + i) * ld(dh, y0 + j * d + i)
+            st(G, a * mm + b, acc)
+            if b < m:
+                st(G, b * mm + a, acc)
+    tr = ld(G, 0)
+    for a in range(1, m):
+        tr = tr + ld(G, a * mm + a)
+    ridge = 1e-14 * tr / float(m)
+    for a in range(m):
+        st(G, a * mm + a, ld(G, a * mm + a) + ridge)
+    for a in range(m):                           # Gaussian elimination (symmetric positive: no pivots;
+        piv = ld(G, a * mm + a)                  # a zero one, where every defect is 0, divides by 1)
+        st(G, a * mm + a, sel(piv != 0.0, piv, 1.0))
+        inv = 1.0 / ld(G, a * mm + a)
+        for b in range(a + 1, m):
+            f = ld(G, b * mm + a) * inv
+            for c in range(a, mm):
+                st(G, b * mm + c, ld(G, b * mm + c) - f * ld(G, a * mm + c))
+    for a in range(m - 1, -1, -1):               # the coefficients c_a, in G's last column
+        acc = ld(G, a * mm + m)
+        for b in range(a + 1, m):
+            acc = acc - ld(G, a * mm + b) * ld(G, b * mm + m)
+        st(G, a * mm + m, acc / ld(G, a * mm + a))
+    for k in range(m):                           # the weights w_k of T_k, into G's first column
+        acc = ld(G, k * mm + m)                  # (a = k: C(k, k) = 1)
+        binom = 1.0
+        for a in range(k + 1, m):
+            binom = binom * a / (a - k)          # C(a, k)
+            acc = acc + binom * ld(G, a * mm + m)
+        st(G, k * mm, -acc if k % 2 else acc)
+    for i in range(nb):
+        acc = ld(G, 0) * ld(D, i)
+        for k in range(1, m):
+            acc = acc + ld(G, k * mm) * ld(D, k * nb + i)
+        st(ar, i, acc)
+
+
+@njit(inline='always', **_OPTS)
+def _guess(ordy, ordl, depth, rec, nb, sd, w, S):
     """The guess (stages, Λ, μ): ``base`` plus the extrapolated error of the base.  The defects
     δ = solution − base of the last steps are kept as a table of backward differences, T_k = ∇^k δ
     (``D``, newest first); base + T_0 + … + T_{m−1} is the polynomial of degree m − 1 through the
     last m defects, one step on (Newton's backward-difference form), with m per lane: ``ordy`` for
-    the stages, ``ordl`` for Λ and μ (0: the base itself).  A step's solution is a smooth function
-    of its q_n, and so is the base's error, which this polynomial follows."""
-    base, D, guess = at(w, S.base), at(w, S.D), at(w, S.guess)
+    the stages, ``ordl`` for Λ and μ (0: the base itself; AR: base + the fitted recurrence's
+    prediction ``ar``, where ``rec`` > 0).  A step's solution is a smooth function of its q_n, and
+    so is the base's error, which this polynomial follows."""
+    base, D, guess, ar = at(w, S.base), at(w, S.D), at(w, S.guess), at(w, S.ar)
     for i in range(nb):
         x = ld(base, i)
         acc = x
@@ -1020,17 +1100,23 @@ def _guess(ordy, ordl, depth, nb, sd, w, S):
         for k in range(depth):
             acc = acc + ld(D, k * nb + i)
             x = sel(order == float(k + 1), acc, x)
+        if rec > 0:
+            y = ld(base, i) + ld(ar, i)
+            x = sel(mand(order == AR, np.isfinite(y)), y, x)
         st(guess, i, x)
 
 
 @njit(inline='always', **_OPTS)
-def _remember(valid, depth, trust, nb, nl, s, d, g):
+def _remember(valid, depth, rec, trust, floor, nb, nl, s, d, g):
     """After a step taken from a base (lanes ``valid``): the new defect δ = (Y, Λ, μ)_{n+1} − base
     enters the difference table (T_0 = δ, T_k = T_{k−1} − T_{k−1}^old).  The new T_m is the error
     the guess of order m would have made on this step, so each block (stages; Λ and μ) takes for
     its next guess the order that did best here (among those its history allows), and the lane
     trusts its next stage guess (a Jacobian taken there) when that order's error was at most
-    ``trust`` relative to max(|q|, 1)."""
+    ``trust`` relative to max(|q|, 1), and above ``floor`` (the refresh floor: from a guess that
+    close the carried factors converge in the two iterations any start takes, and a Jacobian there
+    is waste).  With ``rec`` > 0 the fitted recurrence's prediction (``ar``,
+    made before the step from the full table) competes too, as order AR."""
     w, S, f, F = g.w, g.S, g.f, g.F
     base, D, Ys, lam, mu, q = at(w, S.base), at(w, S.D), at(w, S.Y), at(w, S.lam), at(w, S.mu), at(w, S.q)
     cur, inv = at(w, S.guess), at(w, S.tl)       # (the guess is spent; tl is free after _prepare)
@@ -1043,6 +1129,8 @@ def _remember(valid, depth, trust, nb, nl, s, d, g):
         st(cur, i, new - ld(base, i))
     zero = sel(valid, 0.0, 0.0)
     besty, bestl, ordy, ordl = zero, zero, zero, zero
+    ary, arl, arok = zero, zero, held >= float(DEPTH)
+    ar = at(w, S.ar)
     for k in range(depth + 1):
         ey, el = zero, zero
         for i in range(nb):
@@ -1052,6 +1140,13 @@ def _remember(valid, depth, trust, nb, nl, s, d, g):
                 ey = sel(a > ey, a, ey)
             else:
                 el = sel(a > el, a, el)
+            if rec > 0 and k == 0:
+                e = abs(re(c - ld(ar, i))) * re(ld(inv, i % d))
+                arok = mand(arok, np.isfinite(e))
+                if i < sd:
+                    ary = sel(e > ary, e, ary)
+                else:
+                    arl = sel(e > arl, e, arl)
             if k < depth:
                 old = ld(D, k * nb + i)
                 st(D, k * nb + i, sel(valid, c, old))
@@ -1064,21 +1159,30 @@ def _remember(valid, depth, trust, nb, nl, s, d, g):
             besty, ordy = sel(better, ey, besty), sel(better, float(k), ordy)
             better = mand(allowed, el < bestl)
             bestl, ordl = sel(better, el, bestl), sel(better, float(k), ordl)
+    if rec > 0:
+        better = mand(arok, ary < besty)
+        besty, ordy = sel(better, ary, besty), sel(better, AR, ordy)
+        better = mand(arok, arl < bestl)
+        bestl, ordl = sel(better, arl, bestl), sel(better, AR, ordl)
     st(f, F.ordy, sel(valid, ordy, ld(f, F.ordy)))
     st(f, F.ordl, sel(valid, ordl, ld(f, F.ordl)))
-    st(f, F.trust, sel(valid, sel(besty <= trust, 1.0, 0.0), ld(f, F.trust)))
+    trusted = mand(besty <= trust, besty > floor)
+    st(f, F.trust, sel(valid, sel(trusted, 1.0, 0.0), ld(f, F.trust)))
     st(f, F.depth, sel(valid, sel(held < float(depth), held + 1.0, float(depth)), held))
 
 
 @njit(**_OPTS)
-def _step(t_next, ev, inside, P, d, s, nz, g):
+def _step(t_next, n0, ev, inside, P, d, s, nz, g):
     """Advance the live lanes by one step; returns the lanes whose step is over (taken, or broken down).
 
     The guess (:func:`_guess`): the last step's stages extrapolated, corrected by the last steps'
     defects (``cfg.depth`` of them; none under ``predictor="extrapolate"``).  A step is tried from
     up to three starts before a lane breaks down: (0) the guess, with a Jacobian taken there where
     the lane trusts it (``F.trust``; never where ``cfg.trust`` < 0: the old rule, and pairs above
-    ``Tolerances.trust_max_unknowns``), else with the factors carried from the last step; if that
+    ``Tolerances.trust_max_unknowns``) and the step is due (its number, ``n0`` + ``F.jn``, a
+    multiple of ``cfg.every``: a schedule by step number, not by the lane's own history, so the
+    lanes of a group take their Jacobians at the same steps wherever their points lie), else with
+    the factors carried from the last step; if that
     fails, (1) the uncorrected base guess with the other choice (a Jacobian there when none are
     carried; under the old rule the base is the guess, so this is its "same guess, fresh
     Jacobian"); then (2) h·q̇(q_n) at every stage, μ = 0, with a Jacobian taken there.  A first
@@ -1100,7 +1204,10 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
     nb = sd + nl + (d if plan.lobatto else 0)
     _base(ev, P, d, s, nl, fresh, g)
     first_try = tries == 0.0
-    _guess(sel(first_try, ld(f, F.ordy), 0.0), sel(first_try, ld(f, F.ordl), 0.0), depth, nb, sd, w, S)
+    rec = int(cfg.rec)
+    if rec > 0 and anyl(ld(f, F.depth) >= float(DEPTH)):     # (only a full table chooses it)
+        _recurrence(rec, nb, d, w, S)
+    _guess(sel(first_try, ld(f, F.ordy), 0.0), sel(first_try, ld(f, F.ordl), 0.0), depth, rec, nb, sd, w, S)
     guess = at(w, S.guess)
     first = mand(live, mor(fresh, last))        # a first step, or the last try: from h·q̇(q_n)
     if anyl(first):
@@ -1110,7 +1217,15 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
             st(guess, sd + nl + m, sel(last, 0.0, ld(guess, sd + nl + m)))
     st(f, F.active, sel(live, 1.0, 0.0))
     have = ld(f, F.have) != 0.0
-    trusted = mand(ld(f, F.trust) != 0.0, ld(f, F.age) >= cfg.age)   # carried: try 0 untrusted, try 1 trusted
+    every = cfg.every                           # this step's number (n0 + F.jn) a multiple of ``every``
+    if every > 1.0:
+        for l in range(nlanes(w)):
+            n = n0 + lget(f, F.jn, l)
+            lset(f, F.okstep, l, 1.0 if n - every * np.floor(n / every) == 0.0 else 0.0)
+    else:
+        st(f, F.okstep, 1.0)
+    due = ld(f, F.okstep) != 0.0                # (okstep is free until _attempt sets it)
+    trusted = mand(mand(ld(f, F.trust) != 0.0, due), ld(f, F.age) >= cfg.age)   # carried: try 0 untrusted, try 1 trusted
     known = mand(have, mor(mand(first_try, mnot(trusted)), mand(tries == 1.0, trusted)))
     _attempt(known, guess, at(w, S.guess + sd), at(w, S.guess + sd + nl), ev, inside, P, d, s, nz, g)
     ok = ld(f, F.okstep) != 0.0
@@ -1120,7 +1235,7 @@ def _step(t_next, ev, inside, P, d, s, nz, g):
     st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
     good = mand(live, ok)
     if depth > 0:
-        _remember(mand(good, mnot(fresh)), depth, cfg.trust, nb, nl, s, d, g)
+        _remember(mand(good, mnot(fresh)), depth, rec, cfg.trust, cfg.floor, nb, nl, s, d, g)
     st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
     age = ld(f, F.age)
     st(f, F.age, sel(good, sel(age < 255.0, age + 1.0, age), age))
@@ -1279,7 +1394,7 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0,
     last = float(nsteps)
     while held > 0:
         rounds += 1
-        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, ev, inside, P, d, s, nz, g)
+        over = _step(t0 + (float(first) + ld(f, F.jn)) * h, float(first), ev, inside, P, d, s, nz, g)
         jn = ld(f, F.jn) + sel(over, 1.0, 0.0)
         st(f, F.jn, jn)
         ends = mand(ld(f, F.held) != 0.0, mor(ld(f, F.live) == 0.0, jn >= last))

@@ -113,7 +113,9 @@ def test_glrk2_unprojected_breaks_down_near_step_74000_whatever_the_last_bits(lv
 
 def test_srk3_standard_energy_order_is_three_asymptotically():
     """docs/convergence.md: on point vortices (T = 2) the local energy order of SRK3 + standard is
-    3.75 between h = 1/16 and 1/32 and 3.06 between 1/512 and 1/1024; the momentum's is 3.00."""
+    3.75 between h = 1/16 and 1/32 and 3.10 between 1/256 and 1/512; the momentum's is 3.00.  (Not
+    between 1/512 and 1/1024: the errors there, 2-6e-14, carry round-off of about 1e-14, and their
+    ratios move with Newton's rule: momentum 2.92-2.99, 2.59 with the Jacobian schedule.)"""
     sy = integrators.system("point_vortices")
     q0 = np.array([1.0, 0.1, 1.0, -0.1])
 
@@ -123,6 +125,6 @@ def test_srk3_standard_energy_order_is_three_asymptotically():
         return np.max(np.abs(sy.H(q) - sy.H(q[0]))), np.max(np.abs(sy.momentum(q) - sy.momentum(q[0])))
 
     (e16, _), (e32, _) = errors(1 / 16), errors(1 / 32)
-    (e512, p512), (e1024, p1024) = errors(1 / 512), errors(1 / 1024)
+    (e256, p256), (e512, p512) = errors(1 / 256), errors(1 / 512)
     assert math.log2(e16 / e32) > 3.6
-    assert 2.9 < math.log2(e512 / e1024) < 3.2 and abs(math.log2(p512 / p1024) - 3) < 0.1
+    assert 2.9 < math.log2(e256 / e512) < 3.2 and abs(math.log2(p256 / p512) - 3) < 0.1
