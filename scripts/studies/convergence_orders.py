@@ -247,27 +247,21 @@ Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
   momentum 2.2e-30) GLRK5 + symmetric's solution order read 5.90 (its last point 4.2e-30 on the
   floor) and GLRK6 + symplectic's momentum 15.38 (its last point left out): the measured floors
   above are where each series levels.
-* **GLRK3 + standard's solution order −2.13 and LobIIIA3 + standard's energy order 2.77 are
-  round-off, not the methods.** GLRK3 + standard's solution errors 3.4e-12 and 4.7e-14 at h = 2⁻⁵
-  and 2⁻⁶ (local order 6.2) are followed by 1.3e-14 and 8.4e-14, above the floor of 1e-14 by
-  round-off accumulated over 128–512 steps, so the fit's last three points are round-off; its
-  energy (6.01), momentum (6.87) and long-double (6.00) orders agree with the paper.
-  LobIIIA3 + standard's energy error at h = 2⁻⁹ is 4.6e-15, just above its floor of 2e-15 (local
-  orders before it 3.9–4.0; long double 4.12). Issue 55's predictor moved these last bits: before
-  it the two errors happened to be 4.4e-16 and 8.8e-16, under the floors, and the fits read 5.99 and
-  3.90.
-* **Six Lobatto cells moved by round-off with the refresh floor (issue 55's second step).** The
-  engine no longer takes a Jacobian after an update below 1e-12, so the last bits of every run
-  moved, and where a series ends at its floor the fit moved with them: LobIIIA4 + symmetric's
-  solution order 5.98 → −0.46 (errors at h = 2⁻⁶ … 2⁻⁹: 6.8e-14, 1.3e-14, 1.1e-14, 2.6e-14, where
-  they were 7.2e-14, 5.8e-15, 5.9e-15, 3.9e-15: all at the solution floor of 1e-14),
-  LobIIIB4 + standard's 6.02 → −0.97 (2.2e-14 … 8.5e-14 against 3.3e-15 … 1.1e-13), LobIIIB4 +
-  midpoint's 3.79 → 1.21 (1.7e-14 and 2.6e-14 at the two smallest h against 1.2e-14 and 3.6e-15),
-  LobIIIB4 + none's 4.03 → 3.49 (last error 1.3e-14), LobIIIA3 + symmetric's energy 4.00 → 3.19
-  and LobIIIA3 + midpoint's 4.00 → 3.46 (last errors 2.8e-15 and 2.9e-15 against the energy floor
-  of 2e-15). Every error above 100 times its floor is within 3 % of what it was (the largest move:
-  LobIIIA3 + midpoint's solution error 1.47e-12 → 1.43e-12), and the long-double orders of these
-  pairs are unchanged.
+* **Cells at the round-off floors move with Newton's rule (issue 55).** Where a series ends at its
+  floor, its fit takes or leaves the last point by the last bits of that error, and every change of
+  the engine's default moves those bits. Against 6e635db (the rule before issue 55) the re-run of
+  2026-11-27 (the third step: the fitted recurrence, and a lane converging at its second iteration
+  at the earliest) moved 121 of 1,725 errors by more than 3×, all of them below 1e-11; no error above
+  1e-11 moved by more than 3 %. The orders that moved are all such cells: GLRK2 + symmetric's and
+  GLRK2 + midpoint's energy orders 4.00 → 2.79 and 3.99 → 3.00 (last errors 3.3e-15 and 2.4e-15 at
+  h = 2⁻⁹, just above the energy floor of 2e-15, where the step before left 7.2e-16 and 7.7e-16), LobIIIA2 +
+  symmetric's momentum order 3.99 → 2.67 (2.7e-14 against 4.5e-15, floor 1e-14), LobIIIA3 +
+  symmetric's and + midpoint's energy orders 4.00 → 3.28 and 3.46 (2.5e-15 and 2.9e-15), LobIIIA4 +
+  symmetric's solution order 5.98 → 4.34 (4.5e-14). The cells the two earlier steps had moved are
+  back: GLRK3 + standard's solution order 6.03 (5.99 at 6e635db; −2.13 after the first step),
+  LobIIIA3 + standard's energy 3.90 (3.90; 2.77), LobIIIB4 + standard's solution 6.00 (6.02;
+  −0.97), LobIIIB4 + midpoint's 3.88 (3.79; 1.21), LobIIIB4 + none's 4.04 (4.03; 3.49). The local
+  orders above the floors and the long-double orders of all these pairs are unchanged.
 * **No reference floor any more; the floor was double precision, and long double lowers it 2,048×.** The mpmath reference agrees with a
   36-digit run to the last bit of a double, so every solution error above 1e-14 is the method's (the
   DOP853 reference used before was off by 4.1e-14, which hid GLRK4's order: 7.4–7.5 then, 7.95–8.01
@@ -328,18 +322,20 @@ t = 0, no reference solution):
 | 2^-4 | 2.594e-08 | 3.83 | 1.126e-08 | 2.99 |
 | 2^-5 | 1.927e-09 | 3.75 | 1.411e-09 | 3.00 |
 | 2^-6 | 1.613e-10 | 3.58 | 1.765e-10 | 3.00 |
-| 2^-7 | 1.563e-11 | 3.37 | 2.207e-11 | 3.00 |
-| 2^-8 | 1.702e-12 | 3.20 | 2.757e-12 | 3.00 |
-| 2^-9 | 1.987e-13 | 3.10 | 3.437e-13 | 3.00 |
-| 2^-10 | 2.388e-14 | 3.06 | 4.485e-14 | 2.94 |
-| 2^-11 | 3.095e-15 | 2.95 | 5.940e-15 | 2.92 |
-| 2^-12 | 7.286e-16 | 2.09 | 3.414e-15 | 0.80 |
-| 2^-13 | 2.914e-16 | 1.32 | 5.440e-15 | -0.67 |
+| 2^-7 | 1.563e-11 | 3.37 | 2.206e-11 | 3.00 |
+| 2^-8 | 1.702e-12 | 3.20 | 2.758e-12 | 3.00 |
+| 2^-9 | 1.985e-13 | 3.10 | 3.439e-13 | 3.00 |
+| 2^-10 | 2.410e-14 | 3.04 | 4.136e-14 | 3.06 |
+| 2^-11 | 3.293e-15 | 2.87 | 5.385e-15 | 2.94 |
+| 2^-12 | 4.198e-16 | 2.97 | 3.747e-15 | 0.52 |
+| 2^-13 | 3.920e-16 | 0.10 | 2.387e-15 | 0.65 |
 
-fit over 10 h (energy error > 1e-14): e(h) = 1.158e-03 h^4 + 2.454e-05 h^3, largest relative residual 16.6%; the terms are equal at h = 0.0212
+fit over 10 h (energy error > 1e-14): e(h) = 1.157e-03 h^4 + 2.460e-05 h^3, largest relative residual 16.5%; the terms are equal at h = 0.0213
 
-The local order falls monotonically from 3.83 (h = 1/16) to 3.06 (h = 1/1024) and 2.95 (h = 1/2048, the
-last h above round-off), while the momentum's is 3.00 throughout. The energy error is the sum of an h⁴
+The local order falls from 3.83 (h = 1/16) to 3.04 (h = 1/1024), 2.87 (h = 1/2048) and 2.97
+(h = 1/4096, the last h above round-off; re-run 2026-11-27 with issue 55's default, whose round-off at
+the smallest h is the old rule's again: docs/benchmarks-history.md), while the momentum's is 3.00 down
+to h = 1/512. The energy error is the sum of an h⁴
 term and an h³ term whose coefficient is about 50× smaller: the h⁴ term dominates for h above about
 1/50, where the paper's table (4) and our 3.47 over h = 1/32 … 1/128 were measured, and the h³ term
 below. The standard projection of SRK3 therefore has energy order 3, the same as its momentum order
