@@ -5,6 +5,7 @@
     python scripts/studies/benchmarks_predictor.py --flops   # only the flop counts of an iteration and a Jacobian
     python scripts/studies/benchmarks_predictor.py --paper   # only the engine on paper_poincare's points
     python scripts/studies/benchmarks_predictor.py --floor   # only Jacobians of one orbit against the refresh floor
+    python scripts/studies/benchmarks_predictor.py --calls   # only a point-step in calls of 10 against one call
 
 The rules run in this process on the same points, one thread, alternating which goes first:
 ``Tolerances(predictor="extrapolate")`` ("before": the last step's stages extrapolated, the factors
@@ -205,6 +206,28 @@ def paper_points():
     return total
 
 
+def calls():
+    """What a call costs: half of paper_poincare's points, 200 steps in 20 calls of 10 (its output
+    cadence) and in one call, one thread, µs a point-step, the default and the old rule: each call
+    moves every point's LU factors and predictor table into the lanes and back."""
+    sy = integrators.system("guiding_centre_symmetric")
+    pts = np.concatenate([invariants.loop("guiding_centre", 2000),
+                          invariants.surface("guiding_centre", 100, 100).reshape(-1, 4)])[::2]
+    for tab in ("GLRK1", "GLRK2", "SRK3"):
+        row = []
+        for rule in ("defects", "before"):
+            for n_calls in (20, 1):
+                e = integrators.Engine(sy, integrators.tableau(tab), "symmetric", 10.0, tolerances=RULES[rule])
+                e.warm(pts)
+                st = e.state(pts)
+                n = 200 // n_calls
+                t = time.perf_counter()
+                for k in range(n_calls):
+                    e.advance(st, 1 + n * k, n)
+                row.append(f"{rule}, {n_calls} call(s): {(time.perf_counter() - t) / (len(pts) * 200) * 1e6:.3f} us")
+        print(f"{tab}-symmetric: " + "; ".join(row), flush=True)
+
+
 def floor_orbit():
     """One orbit of GLRK4- and GLRK6-symmetric near the loop, 300 steps: Jacobians and iterations per step
     with the refresh floor at 0 (the old refresh rule), 1e-14, 1e-13 and 1e-12 (the default)."""
@@ -251,6 +274,7 @@ def main():
     ap.add_argument("--flops", action="store_true", help="print the flop counts as coded and stop")
     ap.add_argument("--paper", action="store_true", help="the engine alone on paper_poincare's points, and stop")
     ap.add_argument("--floor", action="store_true", help="Jacobians of one orbit against the refresh floor, and stop")
+    ap.add_argument("--calls", action="store_true", help="a point-step in calls of 10 steps against one call, and stop")
     a = ap.parse_args()
     set_threads(1)
     sy = integrators.system("guiding_centre_symmetric")
@@ -259,6 +283,9 @@ def main():
         return
     if a.floor:
         floor_orbit()
+        return
+    if a.calls:
+        calls()
         return
     if a.flops:
         for tab, proj in PAIRS:
