@@ -289,7 +289,7 @@ class Tolerances:
     recurrence : the coefficients (0 … kernel.RECURRENCE, default 4; 0: none) of a linear
         recurrence fitted to the last DEPTH defects, whose prediction competes with the
         polynomial orders (``"defects"`` only; :func:`integrators.kernel._recurrence`): it follows
-        uniform rotations and the parasitic two-step wiggles that no polynomial follows
+        uniform rotations and the parasitic two-step wiggles that the polynomials follow poorly
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
