@@ -119,6 +119,24 @@ def get_threads() -> int:
 
 # -- the state and the engine --------------------------------------------------------------------
 
+class Output(NamedTuple):
+    """The points at one output inside an :meth:`Engine.advance_outputs` call: q, p, Λ (= hλ), live
+    and breakdown time as a call ending there would leave them in the :class:`State` (the same
+    shapes; a point that broke down earlier holds its frozen state, as the State does).  What an
+    output needs of a state, without its Newton factors and predictor table."""
+    q: np.ndarray
+    p: np.ndarray
+    Lam: np.ndarray
+    live: np.ndarray
+    breakdown_time: np.ndarray
+
+    def nearest(self):
+        """(q, p, Λ) as doubles, as :meth:`State.nearest`."""
+        if self.q.ndim == 3:
+            return self.q[..., 0], self.p[..., 0], self.Lam[..., 0]
+        return self.q, self.p, self.Lam
+
+
 class State:
     """The per-point state of a run (leading points axis on every array).
 
@@ -482,16 +500,49 @@ class Engine:
         ``lanes``: W, points advanced together in SIMD lanes (1, kernel.LANES or kernel.WIDE; None:
         :meth:`lanes_for` the state's points).  Any choice gives the same bits.  Returns the :class:`LaneUse` of the call
         (how many group steps the lanes took)."""
+        return self._advance(state, first, nsteps, t0, block, lanes, 0, 0)
+
+    def advance_outputs(self, state, first, nsteps, every, t0=0.0, block=BLOCK, lanes=None):
+        """:meth:`advance`, and the outputs inside the call: for every step number n = k·every with
+        first ≤ n < first + nsteps − 1 (the call's last step is ``state`` itself), an
+        :class:`Output` of every point's q, p, Λ, live and breakdown time as they were after step n,
+        the same values that a call ending at n would leave in ``state`` (bits included).  A point
+        keeps its lane through the whole call, so its Newton factors and predictor table are not
+        moved through memory at every output (docs/benchmarks.md, "What a call costs").  Returns
+        (LaneUse, [(n, Output)]).
+        """
+        every = int(every)
+        if every < 1:
+            raise ValueError(f"every must be a positive number of steps, got {every!r}")
+        last = int(first) + int(nsteps) - 1
+        steps = [n for n in range(-(-int(first) // every) * every, last, every)]
+        live0, bt0 = state.live.copy(), state.breakdown_time.copy()
+        use, snap = self._advance(state, first, nsteps, t0, block, lanes, every, len(steps))
+        sq, sp, sl, mark = snap
+        outs = []
+        for k, n in enumerate(steps):
+            got = mark[k] != 0
+            keep = got.reshape((-1,) + (1,) * (state.q.ndim - 1))
+            outs.append((n, Output(np.where(keep, sq[k], state.q), np.where(keep, sp[k], state.p),
+                                   np.where(keep, sl[k], state.Lam), got,
+                                   np.where(live0 & ~got, state.breakdown_time, bt0))))
+        return use, outs
+
+    def _advance(self, state, first, nsteps, t0, block, lanes, every, K):
         from . import kernel
         spec = self._specialise(state, lanes)
         rounds = self._rounds(state, block)
         arrays = state._tuple(self.nz)
         if state.needs_factors:
             self._refactor(state, arrays, spec.number == "double-double", spec.number == "complex step")
+        shape = (K,) + state.q.shape
+        snap = (np.empty(shape, state.q.dtype), np.empty(shape, state.q.dtype), np.empty(shape, state.q.dtype),
+                np.zeros((K, state.q.shape[0]), np.uint8))
         kernel.advance(spec.ev, spec.inside, self.post, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
                        int(nsteps), int(block), arrays, (0,) * self.system.d, spec.newton, spec.proto,
-                       self._layout(), rounds)
-        return LaneUse(spec.lanes, *(int(x) for x in rounds.sum(axis=0)))
+                       self._layout(), rounds, snap, int(every) if K > 0 else 0)
+        use = LaneUse(spec.lanes, *(int(x) for x in rounds.sum(axis=0)))
+        return (use, snap) if every else use
 
     def _specialise(self, state, lanes=None):
         """The :class:`Specialisation` a call on ``state`` takes: its number type (a double-double
@@ -653,8 +704,11 @@ def _lagrange_matrix(nodes, targets):
     return E
 
 
+SNAPSHOT_BYTES = 32 << 20     # march's outputs inside one call (q, p, Λ of every point): at most this
+
+
 def march(engine, state, start, stop, every, on_output=None, progress=None, check=None, t0=0.0, target=0.25,
-          block=BLOCK):
+          block=BLOCK, light=None):
     """The time loop: advance ``state`` from step ``start`` to ``stop``.
 
     After every step that is a multiple of ``every``, ``on_output(step)`` is called (a checkpoint
@@ -662,21 +716,46 @@ def march(engine, state, start, stop, every, on_output=None, progress=None, chec
     (never past an output), with ``progress(step)`` and ``check()`` (which may raise to stop the
     run) between calls; how the steps are grouped, and ``every``, change no bits (the state carries
     Newton's factors across calls, and a checkpoint notes where they were taken).  Returns the seconds spent advancing.
+
+    ``light(step)``: True where the output at ``step`` needs only the points' q, p, Λ, live and
+    breakdown times (not a checkpoint).  Then a call may run past such outputs
+    (:meth:`Engine.advance_outputs`) and ``on_output(step, output)`` is called with an
+    :class:`Output` in place of the state, the same values; the call ends at the next output that is
+    not light.  On paper_poincare's points a call of 10 steps cost 1.5× the steps of one long call
+    (docs/benchmarks.md, "What a call costs").  Engines without ``advance_outputs`` (a step map)
+    end every call at an output, as without ``light``.
     """
+    outputs = light is not None and hasattr(engine, "advance_outputs")
+    if outputs:     # outputs of one call held at once: at most SNAPSHOT_BYTES
+        most = max(1, SNAPSHOT_BYTES // max(1, 3 * state.q.nbytes))
     step, batch, spent = start, 1, 0.0
     while step < stop:
         if check is not None:
             check()
         to_output = every - step % every
-        n = max(1, min(batch, to_output, stop - step))
+        n = max(1, min(batch, stop - step))
+        if not outputs:
+            n = min(n, to_output)
+        else:                     # on to the first output that is not light (or holds too many before it)
+            o, k = step + to_output, 0
+            while o < step + n and light(o) and k < most:
+                o, k = o + every, k + 1
+            n = min(n, o - step)
         t = time.perf_counter()
-        engine.advance(state, step + 1, n, t0, block)
+        if outputs and n > to_output:
+            _, inside = engine.advance_outputs(state, step + 1, n, every, t0, block)
+        else:
+            engine.advance(state, step + 1, n, t0, block)
+            inside = []
         dt = time.perf_counter() - t
         spent += dt
         step += n
         batch = int(min(max(1, n * target / dt if dt > 0 else 2 * n), 4 * n, 1 << 20))
-        if step % every == 0 and on_output is not None:
-            on_output(step)
+        if on_output is not None:
+            for at, out in inside:
+                on_output(at, out)
+            if step % every == 0:
+                on_output(step)
         if progress is not None:
             progress(step)
     return spent

@@ -154,15 +154,16 @@ def integrate(system, q0, *, tableau="GLRK2", projection="symmetric", h=None, st
     out_p = np.empty_like(out_q)
     out_l = np.empty_like(out_q)
 
-    def record(step):
+    def record(step, out=None):
         k = step // save_every
-        out_q[k], out_p[k] = state.q, state.p
-        out_l[k] = divide_array(state.Lam, h) if dd else state.Lam / h
+        at = state if out is None else out       # (an engine.Output inside a longer call: the same values)
+        out_q[k], out_p[k] = at.q, at.p
+        out_l[k] = divide_array(at.Lam, h) if dd else at.Lam / h
 
     record(0)
     march(engine, state, 0, steps, save_every, on_output=record, t0=t0,
           progress=None if progress is None else (lambda step: progress(step, steps)),
-          block=int(chunk) if chunk is not None else BLOCK)
+          block=int(chunk) if chunk is not None else BLOCK, light=lambda step: True)
     full = (nsave,) + lead + (system.d,)
     lo = {}
     if dd:

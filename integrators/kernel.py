@@ -54,10 +54,12 @@ COMPLEX_STEP = 1e-30    # the audit's complex-step size: imaginary parts are der
 # integrators.engine.Tolerances)
 
 LANES = 8               # W of the vector path: 8 doubles fill an AVX-512 register, two AVX2 ones
-WIDE = 16               # W for small Newton systems (nz <= WIDE_NZ, real states): two registers of
-WIDE_NZ = 12            # lanes, whose independent chains hide each other's latency in the LU and the
-#                         solve (GLRK1 and GLRK2 with any projection, SRK3 unprojected at d = 4);
-#                         above 12 unknowns 16 lanes' scratch outgrows the L1 cache and lose
+WIDE = 16               # W for Newton systems up to WIDE_NZ unknowns (real states): two registers of
+WIDE_NZ = 28            # lanes, whose independent chains hide each other's latency in the LU and the
+#                         solve: every pair at d = 4 (GLRK6-symmetric has 28).  Once the scratch was
+#                         aligned (_aligned), 16 lanes beat 8 by 1.24-1.40x at 16-28 unknowns too
+#                         (SRK3-, GLRK4-, GLRK5-, GLRK6-, LobIIIB4-symmetric; docs/benchmarks.md,
+#                         "Aligned lanes"); the old bound of 12 was measured on unaligned scratch
 #                         (docs/benchmarks-history.md, "Sixteen lanes for small Newton systems").
 DEPTH = 8               # the stage predictor's memory: the defects of the last DEPTH steps' guesses
 RECURRENCE = 4          # the most coefficients of the defects' fitted linear recurrence (_recurrence)
@@ -1350,8 +1352,28 @@ def _next_live(live, order, nxt, hi):
 
 
 @njit(**_OPTS)
+def _record(snap, every, first, l, d, g):
+    """Lane ``l``'s point at the end of its step into ``snap`` (:func:`advance`'s outputs) when the step's
+    number is an output's (a multiple of ``every`` before the call's last step)."""
+    w, S, f, F, ip, IP = g.w, g.S, g.f, g.F, g.ip, g.IP
+    n = first - 1 + int(lget(f, F.jn, l))
+    if n % every != 0:
+        return
+    k = n // every - (first - 1) // every - 1
+    sq, sp, sl, mark = snap
+    if k < 0 or k >= mark.shape[0]:
+        return
+    pt = lget(ip, IP.pt, l)
+    for m in range(d):
+        put3(sq, k, pt, m, lget(w, S.q + m, l))
+        put3(sp, k, pt, m, lget(w, S.p + m, l))
+        put3(sl, k, pt, m, lget(w, S.lam + m, l))
+    mark[k, pt] = 1
+
+
+@njit(**_OPTS)
 def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg,
-           proto, lay):
+           proto, lay, snap, every):
     """The live points among order[lo … hi − 1] through ``nsteps`` steps each, W (= len(proto))
     lanes at a time, with the thread's scratch arrays; returns the group steps taken, the Newton
     iterations they ran and the Jacobians they took.
@@ -1397,6 +1419,12 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0,
         over = _step(t0 + (float(first) + ld(f, F.jn)) * h, float(first), ev, inside, P, d, s, nz, g)
         jn = ld(f, F.jn) + sel(over, 1.0, 0.0)
         st(f, F.jn, jn)
+        if every > 0:                             # outputs inside the call: the points that took their step
+            taken = mand(over, mand(ld(f, F.held) != 0.0, ld(f, F.live) != 0.0))
+            if anyl(taken):
+                for l in range(W):
+                    if lmask(taken, l):
+                        _record(snap, every, first, l, d, g)
         ends = mand(ld(f, F.held) != 0.0, mor(ld(f, F.live) == 0.0, jn >= last))
         if anyl(ends):                            # lanes whose point is done: hand it back, take the next
             for l in range(W):
@@ -1412,8 +1440,21 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0,
     return rounds, int(lget(f, F.gits, 0)), int(lget(f, F.gjac, 0))
 
 
+@njit(**_OPTS)
+def _aligned(raw, n):
+    """The n elements of ``raw`` from its first 64-byte boundary on (``raw`` holds 16 more).  A lane
+    value (W doubles) then never straddles two cache lines: numba aligns arrays to 32 bytes, and a
+    scratch array at 32 modulo 64 made every lane load and store a split one.  Which of the two a run
+    got was a matter of where its allocations fell, one way for the whole process: the same pair
+    measured 0.21 or 0.27 µs a point-step (SRK3-symmetric at W = 16) from one process to the next
+    (docs/benchmarks.md, "Aligned lanes")."""
+    off = (64 - raw.ctypes.data % 64) % 64 // raw.itemsize
+    return raw[off:off + n]
+
+
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds):
+def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds,
+            snap, every):
     """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
     ``first`` aiming at t0 + first·h.  The live points, in their order, are taken ``block`` at a
     time (dead points are left out before blocks are made, so every block but the last is full),
@@ -1430,6 +1471,13 @@ def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, di
     included) each block's group of lanes ran (:func:`_block`), so point-steps / (W · Σ steps) is
     the share of lane steps that did work, and the points' iterations / (W · Σ iterations) that of
     lane iterations.
+
+    ``snap`` = (q, p, Λ, mark), K outputs of every point, and ``every`` (0: none): after a point's
+    step numbered a multiple of ``every`` (the k-th such step after ``first`` − 1, k < K), its q, p,
+    Λ go to row k and mark[k, point] = 1; a point that is not live after that step is not recorded
+    (:meth:`integrators.engine.Engine.advance_outputs` fills those from its frozen state).  A point
+    keeps its lane for the whole call, so a run's outputs cost no trip of its Newton factors and
+    predictor table through memory (docs/benchmarks.md, "What a call costs").
     """
     arrays = StateArrays(*st_)
     q, Y, lu = arrays.q, arrays.Y, arrays.lu
@@ -1451,13 +1499,13 @@ def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, di
             m += 1
     nblocks = (m + block - 1) // block
     for bi in prange(nblocks):
-        WS = np.zeros(nw * (q.ndim - 1), q.dtype)     # (a double-double state, (n, d, 2): two doubles a value)
-        FS = np.zeros(nf)
-        IS = np.zeros(ni, np.int64)
+        WS = _aligned(np.zeros(nw * (q.ndim - 1) + 16, q.dtype), nw * (q.ndim - 1))   # (a double-double state,
+        FS = _aligned(np.zeros(nf + 16), nf)                                            # (n, d, 2): two doubles
+        IS = _aligned(np.zeros(ni + 16, np.int64), ni)                                  # a value)
         QR = np.zeros(d)
         rounds[bi, 0], rounds[bi, 1], rounds[bi, 2] = _block(
             WS, FS, IS, QR, order, bi * block, min(m, (bi + 1) * block), ev, inside, post, kp, h, tb, plan, t0, first,
-            nsteps, st_, d, s, nz, cfg, proto, lay)
+            nsteps, st_, d, s, nz, cfg, proto, lay, snap, every)
 
 
 def advance_argument(sig, name):

@@ -237,9 +237,9 @@ rng = random.Random(comm.rank)
 march = driver.march
 
 def uneven(engine, st, start, stop, every, on_output, *args, **kw):
-    def late(step):                   # this rank reaches its outputs late by a random 0-slow s
+    def late(step, *out):             # this rank reaches its outputs late by a random 0-slow s
         time.sleep(rng.uniform(0.0, slow))
-        on_output(step)
+        on_output(step, *out)
     return march(engine, st, start, stop, every, late, *args, **kw)
 
 driver.march = uneven

@@ -123,6 +123,38 @@ def test_results_and_breakdowns_do_not_depend_on_the_output_cadence(scene, pair,
             assert np.array_equal(getattr(sols[0], f)[::40 // every], getattr(s, f)), f
 
 
+@pytest.mark.parametrize("scene,pair,h", CADENCE_CASES[:2])
+def test_outputs_inside_a_call_are_the_state_a_call_ending_there_leaves(scene, pair, h):
+    """march with ``light`` (Engine.advance_outputs: calls that run past outputs and record them)
+    against a call per output: q, p, Λ, live and the breakdown times at each of 40 outputs bitwise
+    equal, on points that break down at steps spread over the run; the final states equal too."""
+    from integrators.engine import Engine, march
+    from integrators.service.scene import load_scene
+    sc = load_scene(scene)
+    q0 = sc.loop_points()[::8]
+    got = {}
+    for light in (None, lambda step: True):
+        eng = Engine(sc.system(), integrators.tableau(pair[0]), pair[1], h)
+        st = eng.state(q0)
+        rows = []
+
+        def on_output(step, out=None):
+            at = st if out is None else out
+            rows.append((step,) + tuple(np.array(getattr(at, f)) for f in ("q", "p", "Lam", "live", "breakdown_time")))
+
+        march(eng, st, 0, 40, 1, on_output, light=light, target=1e-9 if light is None else 10.0)
+        got[light is None] = rows, st
+    (per_call, a), (inside, b) = got[True], got[False]
+    assert [r[0] for r in per_call] == [r[0] for r in inside] == list(range(1, 41))
+    lives = [int(r[4].sum()) for r in per_call]
+    assert lives[0] > lives[-1] and len(set(lives)) > 2, "the case must break points down at several steps"
+    for x, y in zip(per_call, inside):
+        for u, v in zip(x[1:], y[1:]):
+            assert u.dtype == v.dtype and np.array_equal(u, v, equal_nan=True), x[0]
+    for f in ("q", "p", "Lam", "live", "breakdown_time", "iterations", "steps"):
+        assert np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True), f
+
+
 def test_the_driver_gives_the_same_file_values_for_output_every_1_and_10(tmp_path):
     """A scene run with output_every = 1 and 10: the same breakdown times, and the same points and
     invariants at every output both wrote (issue 56)."""

@@ -242,7 +242,7 @@ def test_warm_compiles_the_width_a_call_will_take_and_advances_nothing():
     """Engine.warm(q) compiles the kernel specialisation and lane function that a call on q will
     use (the driver warms every pair's before the first pair, so no pair's wall time holds a
     compilation): 16 lanes for GLRK2-symmetric (12 unknowns) on kernel.WIDE_POINTS points, 8 for
-    GLRK4-symmetric (20), 1 for fewer than 8 points; nothing is advanced."""
+    GLRK4-symmetric on 20 points, 1 for fewer than 8 points; nothing is advanced."""
     from integrators import kernel
     sy = integrators.system("guiding_centre_symmetric")
     q0 = np.tile(sy.defaults["q0"], (kernel.WIDE_POINTS, 1))

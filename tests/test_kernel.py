@@ -52,9 +52,9 @@ def test_the_scratch_layout_lays_every_buffer_end_to_end(s, d, nz):
 
 
 def test_the_lane_width_rule():
-    """W = 16 for small Newton systems (nz ≤ 12) on calls of at least 1,024 points, else 8."""
-    assert kernel.lane_width(12, 1024) == kernel.WIDE == 16
-    assert kernel.lane_width(13, 1024) == kernel.lane_width(12, 1023) == kernel.LANES == 8
+    """W = 16 for Newton systems of up to 28 unknowns on calls of at least 1,024 points, else 8."""
+    assert kernel.lane_width(28, 1024) == kernel.WIDE == 16
+    assert kernel.lane_width(29, 1024) == kernel.lane_width(28, 1023) == kernel.LANES == 8
 
 
 def test_the_projection_codes_are_the_kernels():

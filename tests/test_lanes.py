@@ -48,12 +48,12 @@ def test_lanes_give_the_scalar_paths_bits_on_every_pair(sysname, rng):
 
 def test_small_newton_systems_take_sixteen_lanes():
     """A pair's default width follows its Newton unknowns and the call's points (kernel.lane_width):
-    16 lanes up to 12 unknowns from kernel.WIDE_POINTS points on, else 8; states of fewer than 8
-    points run alone, double-double ones in 8 lanes."""
+    16 lanes up to 28 unknowns (every pair at d = 4) from kernel.WIDE_POINTS points on, else 8;
+    states of fewer than 8 points run alone, double-double ones in 8 lanes."""
     sy = integrators.system("guiding_centre_symmetric")          # d = 4
     q0 = invariants.loop("guiding_centre", kernel.WIDE_POINTS)
     for tab, proj, nz, W in (("GLRK1", "none", 4, 16), ("GLRK2", "symmetric", 12, 16),
-                             ("SRK3", "symmetric", 16, 8), ("GLRK4", "none", 16, 8)):
+                             ("SRK3", "symmetric", 16, 16), ("GLRK6", "symmetric", 28, 16)):
         eng = integrators.Engine(sy, integrators.tableau(tab), proj, 1.0)
         assert (eng.nz, eng.width) == (nz, W), (tab, proj)
         assert eng.advance(eng.state(q0), 1, 1).W == W

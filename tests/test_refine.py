@@ -166,9 +166,9 @@ rng = random.Random(comm.rank)
 march = driver.march
 
 def uneven(engine, st, start, stop, every, on_output, *args, **kw):
-    def late(step):
+    def late(step, *out):
         time.sleep(rng.uniform(0.0, 0.01 * comm.rank))
-        on_output(step)
+        on_output(step, *out)
     return march(engine, st, start, stop, every, late, *args, **kw)
 
 driver.march = uneven

@@ -504,13 +504,23 @@ def _run_pair(comm, stream, scene, system, q0, pair_, job, first, has_next, bar,
                                         _cadence(per_output, scene.checkpoint_seconds))
         stream.spent.charge(clock, "gather", time.perf_counter() - w0)
 
-    def on_output(step):
+    def checkpoint_at(step, j):
+        return j % pair.cadence == 0 or step == final
+
+    def on_output(step, out=None):
+        """The output at ``step``: of the state, or of an engine.Output taken inside a longer call."""
         j = (step - start_step) // scene.output_every
         if j == 1:
             first_interval()
         if step < scene.steps:    # the last output is taken below, once the pair's advance is on its clock
-            stream.take(pair, st, step, checkpoint=j % pair.cadence == 0 or step == final,
+            stream.take(pair, st if out is None else out, step, checkpoint=checkpoint_at(step, j),
                         flush=j % pair.batch == 0)
+
+    def light(step):
+        """Whether the output at ``step`` needs no more than q, p, Λ, live and breakdown times: not the
+        first interval's end (rank 0 times it), not a checkpoint, not the pair's end."""
+        j = (step - start_step) // scene.output_every
+        return j > 1 and step < scene.steps and not checkpoint_at(step, j)
 
     done = [start_step]
 
@@ -520,7 +530,7 @@ def _run_pair(comm, stream, scene, system, q0, pair_, job, first, has_next, bar,
         done[0] = step
 
     clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
-                              check)
+                              check, light=light)
     if not measured:
         first_interval()
     stream.take(pair, st, scene.steps, checkpoint=scene.steps == final, flush=True, last=True)
