@@ -286,6 +286,12 @@ class Tolerances:
         however little it contracted: that small, the ratio measures round-off, not the factors
         (default 1e-12, about 4,500 ulps; ``"defects"`` only: the other predictors keep the rule
         before, bitwise; scaled to double-double like tol)
+    trust_floor : ... and no Jacobian at a guess within this either (default 0: the refresh floor
+        alone).  Measured and not kept: 1e-7 ran the unprojected and symplectically projected
+        pairs 1.16-1.21x faster on paper_poincare's points over 200 steps (GLRK2- and SRK3-none,
+        GLRK2- and SRK3-symplectic), where the carried factors converge from such a guess in about
+        three iterations, but 50 steps from the start on points spread over a box GLRK2-none and
+        GLRK2-symplectic 0.89-0.90x, where they do not (docs/benchmarks.md)
     refresh_horizon : ... and only where those factors, at the rate θ of that iteration, would not
         converge within this many more iterations (θ^horizon·|δ| > tol).  Default 0: no such test;
         -1: 2 + ⌈unknowns / 4⌉, about a Jacobian's cost in iterations plus the two it takes after
@@ -326,6 +332,7 @@ class Tolerances:
     trust: float = 1e-3
     trust_max_unknowns: int = 16
     refresh_floor: float = 1e-12
+    trust_floor: float = 0.0
     refresh_horizon: int = 0
     jacobian_age: int = 1
     jacobian_every: int = 1
@@ -338,7 +345,7 @@ class Tolerances:
         if isinstance(self.depth, bool) or not isinstance(self.depth, (int, np.integer)) or \
                 not 1 <= self.depth <= DEPTH:
             raise ValueError(f"Tolerances.depth must be an integer from 1 to {DEPTH}, got {self.depth!r}")
-        for name in ("tol", "stall", "stall_complex", "refresh", "trust", "refresh_floor"):
+        for name in ("tol", "stall", "stall_complex", "refresh", "trust", "refresh_floor", "trust_floor"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"Tolerances.{name} must be a finite number ≥ 0, got {v!r}")
@@ -370,7 +377,7 @@ class Tolerances:
     def array(self, double_double=False, unknowns=0) -> np.ndarray:
         """The rule as the kernel reads it for a pair of ``unknowns`` Newton unknowns: one float64
         array in the order of the kernel's :data:`~integrators.kernel.Newton` record (its one owner),
-        filled by name.  With ``double_double``, tol, stall and the refresh floor scaled from
+        filled by name.  With ``double_double``, tol, stall, the refresh floor and the trust floor scaled from
         double's eps to 2⁻¹⁰⁴ (the same rule, one number type down)."""
         from .kernel import Newton
         scale = 2.0 ** -104 / np.finfo(np.float64).eps if double_double else 1.0
@@ -385,7 +392,8 @@ class Tolerances:
                       depth=float(self.depth) if self.predictor == "defects" else 0.0,
                       trust=self.trust if fresh else -1.0,
                       age=float(self.jacobian_age), every=float(self.jacobian_every),
-                      least=2.0 if defects else 1.0, rec=float(self.recurrence) if defects else 0.0)
+                      least=2.0 if defects else 1.0, rec=float(self.recurrence) if defects else 0.0,
+                      carry=max(self.trust_floor, self.refresh_floor) * scale if defects else 0.0)
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 

@@ -57,7 +57,7 @@ LANES = 8               # W of the vector path: 8 doubles fill an AVX-512 regist
 WIDE = 16               # W for Newton systems up to WIDE_NZ unknowns (real states): two registers of
 WIDE_NZ = 28            # lanes, whose independent chains hide each other's latency in the LU and the
 #                         solve: every pair at d = 4 (GLRK6-symmetric has 28).  Once the scratch was
-#                         aligned (_aligned), 16 lanes beat 8 by 1.24-1.40x at 16-28 unknowns too
+#                         aligned (_aligned), 16 lanes beat 8 by 1.25-1.31x at 16-28 unknowns too
 #                         (SRK3-, GLRK4-, GLRK5-, GLRK6-, LobIIIB4-symmetric; docs/benchmarks.md,
 #                         "Aligned lanes"); the old bound of 12 was measured on unaligned scratch
 #                         (docs/benchmarks-history.md, "Sixteen lanes for small Newton systems").
@@ -210,7 +210,8 @@ def layout(s, d, nz):
     return S, F, IP
 
 
-Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age every least rec")
+Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age every least rec "
+                               "carry")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
@@ -221,6 +222,7 @@ test);
 ``accept`` (≠ 0) takes a finite unconverged iterate after maxiter; ``velocity`` (≠ 0)
 adds h·q̇(q_n) to the stage predictor; ``depth`` (0 … DEPTH) how many of the last steps' defects
 correct the guess (:func:`_guess`); a step whose last guess was off by at most ``trust`` (relative)
+and by more than ``carry`` (from closer, the carried factors converge in about three iterations)
 starts its Newton from a Jacobian at the guess instead of the factors carried from the last step
 (negative: never) once those factors are ``age`` steps old, at the steps whose number is a multiple of
 ``every`` (so the lanes of a group take theirs together); a lane converges at its ``least``-th
@@ -262,7 +264,7 @@ def _records(lay):
 
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14])
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14], c[15])
 
 
 @njit(inline='always', **_OPTS)
@@ -1237,7 +1239,7 @@ def _step(t_next, n0, ev, inside, P, d, s, nz, g):
     st(f, F.have, sel(live, sel(ok, 1.0, 0.0), ld(f, F.have)))
     good = mand(live, ok)
     if depth > 0:
-        _remember(mand(good, mnot(fresh)), depth, rec, cfg.trust, cfg.floor, nb, nl, s, d, g)
+        _remember(mand(good, mnot(fresh)), depth, rec, cfg.trust, cfg.carry, nb, nl, s, d, g)
     st(f, F.stp, ld(f, F.stp) + sel(good, 1.0, 0.0))
     age = ld(f, F.age)
     st(f, F.age, sel(good, sel(age < 255.0, age + 1.0, age), age))

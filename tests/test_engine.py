@@ -293,7 +293,7 @@ def test_one_specialisation_names_what_a_call_compiles():
     assert (spec.number, spec.lanes, spec.proto) == ("double-double", 8, (0.0,) * 8)
     scale = 2.0 ** -104 / np.finfo(float).eps
     from integrators.kernel import Newton
-    scaled = [Newton._fields.index(n) for n in ("tol", "stall", "floor")]
+    scaled = [Newton._fields.index(n) for n in ("tol", "stall", "floor", "carry")]
     same = [i for i in range(len(Newton._fields)) if i not in scaled]
     assert np.array_equal(spec.newton[scaled], real.newton[scaled] * scale)
     assert np.array_equal(spec.newton[same], real.newton[same])

@@ -187,7 +187,8 @@ def test_tolerances_check_the_predictor_settings():
                 dict(recurrence=-1), dict(recurrence=kernel.RECURRENCE + 1), dict(recurrence=2.0), dict(jacobian_every=0),
                 dict(trust=float("nan")), dict(predictor="taylor"), dict(trust_max_unknowns=-1),
                 dict(trust_max_unknowns=1.5), dict(refresh_floor=-1e-12), dict(refresh_horizon=-2),
-                dict(refresh_horizon=65), dict(refresh_horizon=True)):
+                dict(refresh_horizon=65), dict(refresh_horizon=True), dict(trust_floor=-1e-7),
+                dict(trust_floor=float("inf"))):
         with pytest.raises(ValueError):
             integrators.Tolerances(**bad)
 
@@ -213,6 +214,18 @@ def test_the_lanes_report_their_jacobians():
     one = eng.state(q0[:1])
     use = eng.advance(one, 1, 50, lanes=1)
     assert 0.45 * 50 <= use.jacobians <= 0.6 * 50 and use.rounds == 50
+
+
+def test_the_trust_floor_carries_the_factors_from_close_guesses():
+    """Tolerances(trust_floor=1e-7): no Jacobian at a guess within 1e-7 (GLRK2-none, 32 points near
+    the loop, 100 steps, one point per lane): fewer than half the default's Jacobians (which takes
+    one at nearly every step from its 1e-8 guesses), more iterations; the default is
+    trust_floor = 0, bitwise the refresh floor alone (engine_bits)."""
+    q0 = protocol_points()
+    its, jacs, _ = newton_per_step("GLRK2", "none", q0, steps=100, lanes=1)
+    its7, jacs7, _ = newton_per_step("GLRK2", "none", q0, integrators.Tolerances(trust_floor=1e-7), steps=100,
+                                     lanes=1)
+    assert jacs > 0.9 and jacs7 < 0.5 * jacs and its7 > its
 
 
 def test_the_refresh_floor_spares_jacobians():
