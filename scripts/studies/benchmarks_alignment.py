@@ -1,5 +1,4 @@
-"""Lane widths and the scratch's alignment, measured in fresh processes (docs/benchmarks.md,
-"Aligned lanes").
+"""Lane widths and the scratch's alignment, measured in fresh processes (benchmarks.md, "Aligned lanes").
 
     python scripts/studies/benchmarks_alignment.py [--processes 3] [--out docs/figures/benchmark_alignment.json]
     python scripts/studies/benchmarks_alignment.py --tree /path/to/another/checkout   # that version's code

@@ -5,7 +5,8 @@
     python scripts/studies/benchmarks_predictor.py --flops   # only the flop counts of an iteration and a Jacobian
     python scripts/studies/benchmarks_predictor.py --paper   # only the engine on paper_poincare's points
     python scripts/studies/benchmarks_predictor.py --floor   # only Jacobians of one orbit against the refresh floor
-    python scripts/studies/benchmarks_predictor.py --calls   # only a point-step in calls of 10, with outputs recorded, in one call
+    python scripts/studies/benchmarks_predictor.py --trust-floor   # only trust_floor=1e-7 against the default
+    python scripts/studies/benchmarks_predictor.py --calls   # only calls of 10 steps, outputs recorded, one call
 
 The rules run in this process on the same points, one thread, alternating which goes first:
 ``Tolerances(predictor="extrapolate")`` ("before": the last step's stages extrapolated, the factors
@@ -180,30 +181,69 @@ def drift():
 
 def paper_points():
     """The engine alone on half the points of paper_poincare (every other point of the 2,000-point
-    loop and the 100 × 100 surface), its 15 pairs, 200 steps in calls of 10, one thread: seconds
-    and iterations per point-step under the old rule, the default, the Jacobian schedule
-    (``jacobian_every=2``) and the carried factors."""
+    loop and the 100 × 100 surface), its 15 pairs, 200 steps as the driver runs them between
+    checkpoints (one call recording the outputs every 10 steps), one thread, best of 2: µs and
+    iterations per point-step under the old rule, the default, the Jacobian schedule
+    (``jacobian_every=2``) and the carried factors (``trust_max_unknowns=0``)."""
     sy = integrators.system("guiding_centre_symmetric")
     pts = np.concatenate([invariants.loop("guiding_centre", 2000),
                           invariants.surface("guiding_centre", 100, 100).reshape(-1, 4)])[::2]
     rules = {"before": RULES["before"], "defects": RULES["defects"], "schedule": RULES["schedule"],
              "carried": integrators.Tolerances(trust_max_unknowns=0)}
     total = dict.fromkeys(rules, 0.0)
+    rows = []
     for tab in ("GLRK1", "GLRK2", "SRK3"):
         for proj in ("none", "standard", "symmetric", "symplectic", "midpoint"):
-            row = []
+            row = dict(pair=f"{tab}-{proj}")
             for rule, tol in rules.items():
                 e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
                 e.warm(pts)
-                st = e.state(pts)
-                t = time.perf_counter()
-                for k in range(20):
-                    e.advance(st, 1 + 10 * k, 10)
-                total[rule] += time.perf_counter() - t
-                row.append(f"{rule} {st.iterations.sum() / st.steps.sum():.2f} it.")
-            print(f"{tab}-{proj}: " + ", ".join(row), flush=True)
+                best = np.inf
+                for _ in range(2):
+                    st = e.state(pts)
+                    t = time.perf_counter()
+                    e.advance_outputs(st, 1, 200, 10)
+                    best = min(best, time.perf_counter() - t)
+                total[rule] += best
+                row[rule] = best / (len(pts) * 200) * 1e6
+                row[rule + "_iterations"] = st.iterations.sum() / st.steps.sum()
+            rows.append(row)
+            print(f"{row['pair']}: " + ", ".join(f"{r} {row[r]:.3f} us {row[r + '_iterations']:.2f} it." for r in rules)
+                  + f"; defects / before {row['before'] / row['defects']:.2f}x", flush=True)
     print("seconds, all 15 pairs: " + ", ".join(f"{r} {v:.2f}" for r, v in total.items()))
-    return total
+    return rows
+
+
+def trust_floor():
+    """Tolerances(trust_floor=1e-7) against the default (0: the refresh floor alone), one thread,
+    best of 2: µs a point-step on half of paper_poincare's points (200 steps as the driver runs
+    them) and on 10⁴ points near the loop and spread over its box (50 steps from the start), and
+    the protocol's iterations and Newton work (32 points, one a lane)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_predictor import newton_per_step, protocol_points
+    sy = integrators.system("guiding_centre_symmetric")
+    paper = np.concatenate([invariants.loop("guiding_centre", 2000),
+                            invariants.surface("guiding_centre", 100, 100).reshape(-1, 4)])[::2]
+    sets = dict(paper=(paper, 200), **{k: (v, 50) for k, v in point_sets(10000).items()})
+    for tab, proj in (("GLRK1", "none"), ("GLRK2", "none"), ("SRK3", "none"), ("GLRK2", "symplectic"),
+                      ("SRK3", "symplectic"), ("GLRK2", "standard"), ("GLRK2", "symmetric"), ("SRK3", "symmetric")):
+        row = []
+        for fl in (0.0, 1e-7):
+            tol = integrators.Tolerances(trust_floor=fl)
+            its, _, work = newton_per_step(tab, proj, protocol_points(), tol, lanes=1)
+            e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
+            speed = {}
+            for name, (pts, steps) in sets.items():
+                best = np.inf
+                for _ in range(2):
+                    st = e.state(pts)
+                    t = time.perf_counter()
+                    e.advance_outputs(st, 1, steps, 10)
+                    best = min(best, time.perf_counter() - t)
+                speed[name] = best / (len(pts) * steps) * 1e6
+            row.append(f"trust_floor {fl:g}: protocol {its:.2f} it. work {work:.2f}; "
+                       + ", ".join(f"{k} {v:.3f} us" for k, v in speed.items()))
+        print(f"{tab}-{proj}: " + " | ".join(row), flush=True)
 
 
 def calls():
@@ -292,7 +332,9 @@ def main():
     ap.add_argument("--flops", action="store_true", help="print the flop counts as coded and stop")
     ap.add_argument("--paper", action="store_true", help="the engine alone on paper_poincare's points, and stop")
     ap.add_argument("--floor", action="store_true", help="Jacobians of one orbit against the refresh floor, and stop")
-    ap.add_argument("--calls", action="store_true", help="a point-step in calls of 10 steps, in one call recording outputs and in one call, and stop")
+    ap.add_argument("--trust-floor", action="store_true", help="trust_floor=1e-7 against the default, and stop")
+    ap.add_argument("--calls", action="store_true",
+                    help="a point-step in calls of 10 steps, in one call recording outputs and in one call, and stop")
     a = ap.parse_args()
     set_threads(1)
     sy = integrators.system("guiding_centre_symmetric")
@@ -304,6 +346,9 @@ def main():
         return
     if a.calls:
         calls()
+        return
+    if a.trust_floor:
+        trust_floor()
         return
     if a.flops:
         for tab, proj in PAIRS:
