@@ -132,9 +132,7 @@ class Output(NamedTuple):
 
     def nearest(self):
         """(q, p, Λ) as doubles, as :meth:`State.nearest`."""
-        if self.q.ndim == 3:
-            return self.q[..., 0], self.p[..., 0], self.Lam[..., 0]
-        return self.q, self.p, self.Lam
+        return State.nearest(self)
 
 
 class State:
@@ -523,7 +521,7 @@ class Engine:
         if every < 1:
             raise ValueError(f"every must be a positive number of steps, got {every!r}")
         last = int(first) + int(nsteps) - 1
-        steps = [n for n in range(-(-int(first) // every) * every, last, every)]
+        steps = list(range(-(-int(first) // every) * every, last, every))
         live0, bt0 = state.live.copy(), state.breakdown_time.copy()
         use, snap = self._advance(state, first, nsteps, t0, block, lanes, every, len(steps))
         sq, sp, sl, mark = snap
