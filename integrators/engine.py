@@ -284,12 +284,13 @@ class Tolerances:
         however little it contracted: that small, the ratio measures round-off, not the factors
         (default 1e-12, about 4,500 ulps; ``"defects"`` only: the other predictors keep the rule
         before, bitwise; scaled to double-double like tol)
-    trust_floor : ... and no Jacobian at a guess within this either (default 0: the refresh floor
-        alone).  Measured and not kept: 1e-7 ran the unprojected and symplectically projected
-        pairs 1.16-1.21x faster on paper_poincare's points over 200 steps (GLRK2- and SRK3-none,
-        GLRK2- and SRK3-symplectic), where the carried factors converge from such a guess in about
-        three iterations, but 50 steps from the start on points spread over a box GLRK2-none and
-        GLRK2-symplectic 0.89-0.90x, where they do not (docs/benchmarks.md)
+    trust_floor : ... and no Jacobian at a guess within this either (default 1e-7; 0: the refresh
+        floor alone, the rule before it, bitwise).  The unprojected and symplectically projected
+        pairs' guesses end near 10⁻⁸ on long runs, where the carried factors converge in three or
+        four iterations and a Jacobian at every step costs more: on paper_poincare's points GLRK2-
+        and SRK3-none and -symplectic run 1.2x faster with it, 50 steps from the start on points
+        spread over a box GLRK2-none and -symplectic 0.88x (still 1.13-1.25x the rule before issue
+        55; docs/benchmarks.md)
     refresh_horizon : ... and only where those factors, at the rate θ of that iteration, would not
         converge within this many more iterations (θ^horizon·|δ| > tol).  Default 0: no such test;
         -1: 2 + ⌈unknowns / 4⌉, about a Jacobian's cost in iterations plus the two it takes after
@@ -330,7 +331,7 @@ class Tolerances:
     trust: float = 1e-3
     trust_max_unknowns: int = 16
     refresh_floor: float = 1e-12
-    trust_floor: float = 0.0
+    trust_floor: float = 1e-7
     refresh_horizon: int = 0
     jacobian_age: int = 1
     jacobian_every: int = 1

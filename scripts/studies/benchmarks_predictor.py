@@ -5,7 +5,7 @@
     python scripts/studies/benchmarks_predictor.py --flops   # only the flop counts of an iteration and a Jacobian
     python scripts/studies/benchmarks_predictor.py --paper   # only the engine on paper_poincare's points
     python scripts/studies/benchmarks_predictor.py --floor   # only Jacobians of one orbit against the refresh floor
-    python scripts/studies/benchmarks_predictor.py --trust-floor   # only trust_floor=1e-7 against the default
+    python scripts/studies/benchmarks_predictor.py --trust-floor   # only the default (trust_floor=1e-7) against 0
     python scripts/studies/benchmarks_predictor.py --calls   # only calls of 10 steps, outputs recorded, one call
 
 The rules run in this process on the same points, one thread, alternating which goes first:
@@ -13,7 +13,7 @@ The rules run in this process on the same points, one thread, alternating which 
 carried from the last step, refreshed after an iteration that contracted by less than 0.01: the
 engine's bits before issue 55), the default ``Tolerances()`` ("defects": that guess corrected by
 the extrapolated defects of the last steps, by a polynomial or a fitted linear recurrence; a
-Jacobian at the guess, where the last guess was good to 10⁻³ but not within the refresh floor, in
+Jacobian at the guess, where the last guess was good to 10⁻³ but not to 10⁻⁷ (the trust floor), in
 pairs of at most 16 Newton unknowns, the carried factors in larger pairs; refreshed only above the
 refresh floor; at least two iterations a step), the Jacobian schedule ("schedule":
 ``jacobian_every=2``, those Jacobians at every second step by number only) and the other choice
@@ -215,7 +215,7 @@ def paper_points():
 
 
 def trust_floor():
-    """Tolerances(trust_floor=1e-7) against the default (0: the refresh floor alone), one thread,
+    """The default (trust_floor=1e-7) against Tolerances(trust_floor=0) (the refresh floor alone), one thread,
     best of 2: µs a point-step on half of paper_poincare's points (200 steps as the driver runs
     them) and on 10⁴ points near the loop and spread over its box (50 steps from the start), and
     the protocol's iterations and Newton work (32 points, one a lane)."""
@@ -228,7 +228,7 @@ def trust_floor():
     for tab, proj in (("GLRK1", "none"), ("GLRK2", "none"), ("SRK3", "none"), ("GLRK2", "symplectic"),
                       ("SRK3", "symplectic"), ("GLRK2", "standard"), ("GLRK2", "symmetric"), ("SRK3", "symmetric")):
         row = []
-        for fl in (0.0, 1e-7):
+        for fl in (0.0, integrators.Tolerances().trust_floor):
             tol = integrators.Tolerances(trust_floor=fl)
             its, _, work = newton_per_step(tab, proj, protocol_points(), tol, lanes=1)
             e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
@@ -332,7 +332,7 @@ def main():
     ap.add_argument("--flops", action="store_true", help="print the flop counts as coded and stop")
     ap.add_argument("--paper", action="store_true", help="the engine alone on paper_poincare's points, and stop")
     ap.add_argument("--floor", action="store_true", help="Jacobians of one orbit against the refresh floor, and stop")
-    ap.add_argument("--trust-floor", action="store_true", help="trust_floor=1e-7 against the default, and stop")
+    ap.add_argument("--trust-floor", action="store_true", help="the default trust_floor against 0, and stop")
     ap.add_argument("--calls", action="store_true",
                     help="a point-step in calls of 10 steps, in one call recording outputs and in one call, and stop")
     a = ap.parse_args()
