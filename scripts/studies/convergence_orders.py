@@ -261,7 +261,14 @@ Plots of every pair in bold: `docs/figures/convergence_disagreements.png`
   back: GLRK3 + standard's solution order 6.03 (5.99 at 6e635db; −2.13 after the first step),
   LobIIIA3 + standard's energy 3.90 (3.90; 2.77), LobIIIB4 + standard's solution 6.00 (6.02;
   −0.97), LobIIIB4 + midpoint's 3.88 (3.79; 1.21), LobIIIB4 + none's 4.04 (4.03; 3.49). The local
-  orders above the floors and the long-double orders of all these pairs are unchanged.
+  orders above the floors and the long-double orders of all these pairs are unchanged. The trust
+  floor (the fifth step, `Tolerances.trust_floor` = 10⁻⁷, 2026-11-27) moved 8 of 1,755 errors by
+  more than 3× against the third step's, 4 down and 4 up, all below 3e-14, and no error above 1e-11
+  by more than 3 %. The orders that moved by more than 0.1: GLRK3 + midpoint's solution order
+  4.06 → 2.51 (its last error 4.2e-15 → 2.9e-14 at h = 2⁻⁹, now above the floor of 1e-14, so the
+  fit takes it), GLRK3 + none's solution 4.12 → 3.84 (1.0e-14 → 1.5e-14), GLRK2 + midpoint's
+  energy 3.00 → 2.76 (2.4e-15 → 3.4e-15) and momentum 4.00 → 3.89, GLRK2 + symmetric's energy
+  2.79 → 2.95; the errors above the floors are those of the third step to three digits.
 * **No reference floor any more; the floor was double precision, and long double lowers it 2,048×.** The mpmath reference agrees with a
   36-digit run to the last bit of a double, so every solution error above 1e-14 is the method's (the
   DOP853 reference used before was off by 4.1e-14, which hid GLRK4's order: 7.4–7.5 then, 7.95–8.01
@@ -324,18 +331,18 @@ t = 0, no reference solution):
 | 2^-6 | 1.613e-10 | 3.58 | 1.765e-10 | 3.00 |
 | 2^-7 | 1.563e-11 | 3.37 | 2.206e-11 | 3.00 |
 | 2^-8 | 1.702e-12 | 3.20 | 2.758e-12 | 3.00 |
-| 2^-9 | 1.985e-13 | 3.10 | 3.439e-13 | 3.00 |
-| 2^-10 | 2.410e-14 | 3.04 | 4.136e-14 | 3.06 |
-| 2^-11 | 3.293e-15 | 2.87 | 5.385e-15 | 2.94 |
-| 2^-12 | 4.198e-16 | 2.97 | 3.747e-15 | 0.52 |
-| 2^-13 | 3.920e-16 | 0.10 | 2.387e-15 | 0.65 |
+| 2^-9 | 1.987e-13 | 3.10 | 3.434e-13 | 3.01 |
+| 2^-10 | 2.423e-14 | 3.04 | 4.283e-14 | 3.00 |
+| 2^-11 | 2.852e-15 | 3.09 | 4.080e-15 | 3.39 |
+| 2^-12 | 8.847e-16 | 1.69 | 3.664e-15 | 0.16 |
+| 2^-13 | 3.400e-16 | 1.38 | 7.244e-15 | -0.98 |
 
-fit over 10 h (energy error > 1e-14): e(h) = 1.157e-03 h^4 + 2.460e-05 h^3, largest relative residual 16.5%; the terms are equal at h = 0.0213
+fit over 10 h (energy error > 1e-14): e(h) = 1.157e-03 h^4 + 2.464e-05 h^3, largest relative residual 16.4%; the terms are equal at h = 0.0213
 
-The local order falls from 3.83 (h = 1/16) to 3.04 (h = 1/1024), 2.87 (h = 1/2048) and 2.97
-(h = 1/4096, the last h above round-off; re-run 2026-11-27 with issue 55's default, whose round-off at
-the smallest h is the old rule's again: docs/benchmarks-history.md), while the momentum's is 3.00 down
-to h = 1/512. The energy error is the sum of an h⁴
+The local order falls from 3.83 (h = 1/16) to 3.04 (h = 1/1024) and 3.09 (h = 1/2048, the last h
+above round-off; re-run 2026-11-27 with issue 55's trust floor: at h = 1/4096 the energy error is
+8.8e-16, round-off, where the rule before it left 4.2e-16 and a local order of 2.97:
+docs/benchmarks-history.md), while the momentum's is 3.00 down to h = 1/1024. The energy error is the sum of an h⁴
 term and an h³ term whose coefficient is about 50× smaller: the h⁴ term dominates for h above about
 1/50, where the paper's table (4) and our 3.47 over h = 1/32 … 1/128 were measured, and the h³ term
 below. The standard projection of SRK3 therefore has energy order 3, the same as its momentum order
