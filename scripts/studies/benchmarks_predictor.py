@@ -7,6 +7,7 @@
     python scripts/studies/benchmarks_predictor.py --floor   # only Jacobians of one orbit against the refresh floor
     python scripts/studies/benchmarks_predictor.py --trust-floor   # only the default (trust_floor=1e-7) against 0
     python scripts/studies/benchmarks_predictor.py --calls   # only calls of 10 steps, outputs recorded, one call
+    python scripts/studies/benchmarks_predictor.py --four-stages   # only a looser tol for four stages (not kept)
 
 The rules run in this process on the same points, one thread, alternating which goes first:
 ``Tolerances(predictor="extrapolate")`` ("before": the last step's stages extrapolated, the factors
@@ -246,6 +247,58 @@ def trust_floor():
         print(f"{tab}-{proj}: " + " | ".join(row), flush=True)
 
 
+def four_stages():
+    """A looser Newton tolerance for tableaus of four stages or more, measured and not kept
+    (docs/benchmarks-history.md): ``Tolerances(tol=k·eps)`` for k = 4 (the default), 8 and 16.
+    GLRK4- and GLRK6-symmetric on the guiding centre: mean iterations a point-step (32 protocol
+    points and one orbit, one point a lane, 50 steps) and the error after 300 steps of 64 loop
+    points against a double-double run of the same method (max and median over the points); then
+    point vortices (32 points near the convergence study's q₀, T = 2, h = 2⁻⁷ and 2⁻⁹), the error at
+    T against double-double (median and max over the points) for 4 and 8 eps."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_predictor import newton_per_step, protocol_points
+    eps = np.finfo(np.float64).eps
+
+    def truth(sy, tab, proj, h, q0, steps):
+        e = integrators.Engine(sy, integrators.tableau(tab), proj, h, precision="double-double")
+        st = e.state(q0)
+        e.advance(st, 1, steps)
+        q = np.asarray(st.q)
+        return q[..., 0] + q[..., 1]
+
+    sy = integrators.system("guiding_centre_symmetric")
+    q0 = invariants.loop("guiding_centre", 64)
+    for tab in ("GLRK4", "GLRK6"):
+        ref = truth(sy, tab, "symmetric", 10.0, q0, 300)
+        rules = {"before": integrators.Tolerances(predictor="extrapolate"),
+                 **{f"{k} eps": integrators.Tolerances(tol=k * eps) for k in (4, 8, 16)}}
+        for name, tol in rules.items():
+            its = newton_per_step(tab, "symmetric", protocol_points(), tol, lanes=1)[0]
+            orbit = newton_per_step(tab, "symmetric", protocol_points(3)[:1], tol, lanes=1)[0]
+            e = integrators.Engine(sy, integrators.tableau(tab), "symmetric", 10.0, tolerances=tol)
+            st = e.state(q0)
+            e.advance(st, 1, 300)
+            err = np.abs(st.q - ref)
+            print(f"{tab}-symmetric {name:7s}: iterations {its:.2f}, one orbit {orbit:.2f}; error against "
+                  f"double-double after 300 steps: max {err.max():.2e}, median {np.median(err):.2e}", flush=True)
+    sy = integrators.system("point_vortices")
+    q0 = np.array([1.0, 0.1, 1.0, -0.1]) + 1e-3 * np.random.default_rng(3).standard_normal((32, 4))
+    for tab, proj in (("GLRK4", "midpoint"), ("LobIIIB4", "midpoint"), ("GLRK5", "midpoint"), ("GLRK4", "symmetric"),
+                      ("GLRK6", "symmetric"), ("GLRK4", "standard")):
+        for h in (2.0 ** -7, 2.0 ** -9):
+            steps = int(round(2 / h))
+            ref = truth(sy, tab, proj, h, q0, steps)
+            row = []
+            for k in (4, 8):
+                e = integrators.Engine(sy, integrators.tableau(tab), proj, h, tolerances=integrators.Tolerances(tol=k * eps))
+                st = e.state(q0)
+                e.advance(st, 1, steps)
+                err = np.abs(st.q - ref).max(axis=1)
+                row.append(f"{k} eps: median {np.median(err):.1e}, max {err.max():.1e}, "
+                           f"{st.iterations.sum() / st.steps.sum():.2f} it.")
+            print(f"point vortices {tab}-{proj} h = 2^{int(np.log2(h))}: " + " | ".join(row), flush=True)
+
+
 def calls():
     """What a call costs: half of paper_poincare's points, 200 steps in 20 calls of 10 (its output
     cadence), in one call that records the 19 outputs inside it (Engine.advance_outputs, what the
@@ -333,6 +386,9 @@ def main():
     ap.add_argument("--paper", action="store_true", help="the engine alone on paper_poincare's points, and stop")
     ap.add_argument("--floor", action="store_true", help="Jacobians of one orbit against the refresh floor, and stop")
     ap.add_argument("--trust-floor", action="store_true", help="the default trust_floor against 0, and stop")
+    ap.add_argument("--four-stages", action="store_true",
+                    help="tol at 4, 8 and 16 eps for four stages or more: iterations and the error against "
+                         "double-double (measured, not kept), and stop")
     ap.add_argument("--calls", action="store_true",
                     help="a point-step in calls of 10 steps, in one call recording outputs and in one call, and stop")
     a = ap.parse_args()
@@ -343,6 +399,9 @@ def main():
         return
     if a.floor:
         floor_orbit()
+        return
+    if a.four_stages:
+        four_stages()
         return
     if a.calls:
         calls()
