@@ -8,6 +8,7 @@
     python scripts/studies/benchmarks_predictor.py --trust-floor   # only the default (trust_floor=1e-7) against 0
     python scripts/studies/benchmarks_predictor.py --calls   # only calls of 10 steps, outputs recorded, one call
     python scripts/studies/benchmarks_predictor.py --four-stages   # only a looser tol for four stages (not kept)
+    python scripts/studies/benchmarks_predictor.py --roundoff   # only the round-off against double-double
 
 The rules run in this process on the same points, one thread, alternating which goes first:
 ``Tolerances(predictor="extrapolate")`` ("before": the last step's stages extrapolated, the factors
@@ -299,6 +300,34 @@ def four_stages():
             print(f"point vortices {tab}-{proj} h = 2^{int(np.log2(h))}: " + " | ".join(row), flush=True)
 
 
+def roundoff():
+    """Round-off against double-double: point vortices, 32 points near the convergence study's q₀,
+    T = 2, h = 2⁻⁷ and 2⁻⁹; max over each point's coordinates of |q − q_dd| at T (q_dd a
+    double-double run of the same method), median and max over the points, for the rule before
+    issue 55, the default with trust_floor = 0 and the default."""
+    sy = integrators.system("point_vortices")
+    q0 = np.array([1.0, 0.1, 1.0, -0.1]) + 1e-3 * np.random.default_rng(3).standard_normal((32, 4))
+    rules = {"before": integrators.Tolerances(predictor="extrapolate"),
+             "trust_floor 0": integrators.Tolerances(trust_floor=0.0), "default": integrators.Tolerances()}
+    for tab, proj in (("GLRK1", "symmetric"), ("GLRK2", "none"), ("GLRK2", "symmetric"), ("GLRK2", "midpoint"),
+                      ("GLRK3", "midpoint"), ("SRK3", "standard"), ("SRK3", "symplectic")):
+        for h in (2.0 ** -7, 2.0 ** -9):
+            steps = int(round(2 / h))
+            e = integrators.Engine(sy, integrators.tableau(tab), proj, h, precision="double-double")
+            st = e.state(q0)
+            e.advance(st, 1, steps)
+            ref = np.asarray(st.q)
+            ref = ref[..., 0] + ref[..., 1]
+            row = []
+            for name, tol in rules.items():
+                e = integrators.Engine(sy, integrators.tableau(tab), proj, h, tolerances=tol)
+                st = e.state(q0)
+                e.advance(st, 1, steps)
+                err = np.abs(st.q - ref).max(axis=1)
+                row.append(f"{name}: median {np.median(err):.1e}, max {err.max():.1e}")
+            print(f"{tab}-{proj} h = 2^{int(np.log2(h))}: " + " | ".join(row), flush=True)
+
+
 def calls():
     """What a call costs: half of paper_poincare's points, 200 steps in 20 calls of 10 (its output
     cadence), in one call that records the 19 outputs inside it (Engine.advance_outputs, what the
@@ -389,6 +418,8 @@ def main():
     ap.add_argument("--four-stages", action="store_true",
                     help="tol at 4, 8 and 16 eps for four stages or more: iterations and the error against "
                          "double-double (measured, not kept), and stop")
+    ap.add_argument("--roundoff", action="store_true",
+                    help="round-off against double-double on point vortices, the rules side by side, and stop")
     ap.add_argument("--calls", action="store_true",
                     help="a point-step in calls of 10 steps, in one call recording outputs and in one call, and stop")
     a = ap.parse_args()
@@ -402,6 +433,9 @@ def main():
         return
     if a.four_stages:
         four_stages()
+        return
+    if a.roundoff:
+        roundoff()
         return
     if a.calls:
         calls()
