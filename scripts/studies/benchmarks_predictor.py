@@ -248,6 +248,16 @@ def trust_floor():
         print(f"{tab}-{proj}: " + " | ".join(row), flush=True)
 
 
+def double_double_q(sy, tab, proj, h, q0, steps):
+    """q after ``steps`` steps of a double-double run of the pair (hi + lo rounded to double): the
+    reference for the round-off of a double run of the same method."""
+    e = integrators.Engine(sy, integrators.tableau(tab), proj, h, precision="double-double")
+    st = e.state(q0)
+    e.advance(st, 1, steps)
+    q = np.asarray(st.q)
+    return q[..., 0] + q[..., 1]
+
+
 def four_stages():
     """A looser Newton tolerance for tableaus of four stages or more, measured and not kept
     (docs/benchmarks-history.md): ``Tolerances(tol=k·eps)`` for k = 4 (the default), 8 and 16.
@@ -259,14 +269,7 @@ def four_stages():
     sys.path.insert(0, str(ROOT / "tests"))
     from test_predictor import newton_per_step, protocol_points
     eps = np.finfo(np.float64).eps
-
-    def truth(sy, tab, proj, h, q0, steps):
-        e = integrators.Engine(sy, integrators.tableau(tab), proj, h, precision="double-double")
-        st = e.state(q0)
-        e.advance(st, 1, steps)
-        q = np.asarray(st.q)
-        return q[..., 0] + q[..., 1]
-
+    truth = double_double_q
     sy = integrators.system("guiding_centre_symmetric")
     q0 = invariants.loop("guiding_centre", 64)
     for tab in ("GLRK4", "GLRK6"):
@@ -313,11 +316,7 @@ def roundoff():
                       ("GLRK3", "midpoint"), ("SRK3", "standard"), ("SRK3", "symplectic")):
         for h in (2.0 ** -7, 2.0 ** -9):
             steps = int(round(2 / h))
-            e = integrators.Engine(sy, integrators.tableau(tab), proj, h, precision="double-double")
-            st = e.state(q0)
-            e.advance(st, 1, steps)
-            ref = np.asarray(st.q)
-            ref = ref[..., 0] + ref[..., 1]
+            ref = double_double_q(sy, tab, proj, h, q0, steps)
             row = []
             for name, tol in rules.items():
                 e = integrators.Engine(sy, integrators.tableau(tab), proj, h, tolerances=tol)
