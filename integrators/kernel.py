@@ -1211,8 +1211,8 @@ def _step(t_next, n0, ev, inside, P, d, s, nz, g):
     rec = int(cfg.rec)
     if rec > 0 and anyl(ld(f, F.depth) >= float(DEPTH)):     # (only a full table chooses it)
         if rec == RECURRENCE:                   # the default as a constant: the fit's loops unroll, and
-            _recurrence(RECURRENCE, nb, d, w, S)    # its m × m solve stays in registers (the same arithmetic:
-        else:                                   # 0.035 → 0.019 µs a point-step, docs/benchmarks.md)
+            _recurrence(RECURRENCE, nb, d, w, S)    # its m × m solve stays in registers (the same arithmetic,
+        else:                                   # 0.016-0.018 µs a point-step less: docs/benchmarks.md)
             _recurrence(rec, nb, d, w, S)
     _guess(sel(first_try, ld(f, F.ordy), 0.0), sel(first_try, ld(f, F.ordl), 0.0), depth, rec, nb, sd, w, S)
     guess = at(w, S.guess)
