@@ -288,8 +288,8 @@ class Tolerances:
         floor alone, the rule before it, bitwise).  The unprojected and symplectically projected
         pairs' guesses end near 10⁻⁸ on long runs, where the carried factors converge in three or
         four iterations and a Jacobian at every step costs more: on paper_poincare's points GLRK2-
-        and SRK3-none and -symplectic run 1.2x faster with it, 50 steps from the start on points
-        spread over a box GLRK2-none and -symplectic 0.88x (still 1.13-1.25x the rule before issue
+        and SRK3-none and -symplectic run 1.1-1.24x faster with it, 50 steps from the start on points
+        spread over a box GLRK2-none and -symplectic 0.87-0.90x (still 1.17-1.24x the rule before issue
         55; docs/benchmarks.md)
     refresh_horizon : ... and only where those factors, at the rate θ of that iteration, would not
         converge within this many more iterations (θ^horizon·|δ| > tol).  Default 0: no such test;

@@ -220,7 +220,8 @@ def trust_floor():
     """The default (trust_floor=1e-7) against Tolerances(trust_floor=0) (the refresh floor alone), one thread,
     best of 2: µs a point-step on half of paper_poincare's points (200 steps as the driver runs
     them) and on 10⁴ points near the loop and spread over its box (50 steps from the start), and
-    the protocol's iterations and Newton work (32 points, one a lane)."""
+    the protocol's iterations and Newton work (32 points, one a lane); the rule before issue 55
+    (``predictor="extrapolate"``) beside them for scale."""
     sys.path.insert(0, str(ROOT / "tests"))
     from test_predictor import newton_per_step, protocol_points
     sy = integrators.system("guiding_centre_symmetric")
@@ -230,8 +231,10 @@ def trust_floor():
     for tab, proj in (("GLRK1", "none"), ("GLRK2", "none"), ("SRK3", "none"), ("GLRK2", "symplectic"),
                       ("SRK3", "symplectic"), ("GLRK2", "standard"), ("GLRK2", "symmetric"), ("SRK3", "symmetric")):
         row = []
-        for fl in (0.0, integrators.Tolerances().trust_floor):
-            tol = integrators.Tolerances(trust_floor=fl)
+        rules = {f"trust_floor {fl:g}": integrators.Tolerances(trust_floor=fl)
+                 for fl in (0.0, integrators.Tolerances().trust_floor)}
+        rules["before issue 55"] = RULES["before"]
+        for label, tol in rules.items():
             its, _, work = newton_per_step(tab, proj, protocol_points(), tol, lanes=1)
             e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
             speed = {}
@@ -243,7 +246,7 @@ def trust_floor():
                     e.advance_outputs(st, 1, steps, 10)
                     best = min(best, time.perf_counter() - t)
                 speed[name] = best / (len(pts) * steps) * 1e6
-            row.append(f"trust_floor {fl:g}: protocol {its:.2f} it. work {work:.2f}; "
+            row.append(f"{label}: protocol {its:.2f} it. work {work:.2f}; "
                        + ", ".join(f"{k} {v:.3f} us" for k, v in speed.items()))
         print(f"{tab}-{proj}: " + " | ".join(row), flush=True)
 
