@@ -87,20 +87,24 @@ def _periods(period, d):
     """``period`` as (d,) floats, 0 where a coordinate is not periodic; None when none is."""
     if period is None:
         return None
-    if np.ndim(period) == 0:
-        period = [period] * d
-    period = list(period)
-    if len(period) != d:
-        raise ValueError(f"period must be a number or one entry per coordinate ({d}), got {len(period)} entries")
-    P = np.zeros(d)
-    for i, x in enumerate(period):
+    if np.ndim(period) > 1:
+        raise ValueError(f"period must be a number or a 1-D list of one entry per coordinate ({d}), got an array of "
+                         f"shape {np.shape(period)}")
+    scalar = np.ndim(period) == 0
+    entries = [period] if scalar else list(period)
+    if not scalar and len(entries) != d:
+        raise ValueError(f"period must be a number or one entry per coordinate ({d}), got {len(entries)} entries")
+    P = np.zeros(len(entries))
+    for i, x in enumerate(entries):
         x = 0.0 if x is None else x
         if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) \
                 or not np.isfinite(x) or x < 0:
-            raise ValueError(f"period of coordinate {i} must be a positive number, or None or 0 where the "
-                             f"coordinate is not periodic, got {x!r}")
+            raise ValueError(f"period {'' if scalar else f'of coordinate {i} '}must be a positive number, or None or 0 "
+                             f"where the coordinate is not periodic, got {x!r}")
         P[i] = float(x)
-    return P if P.any() else None
+    if not P.any():
+        return None
+    return np.full(d, P[0]) if scalar else P
 
 
 def _unwrap(q, P, axis):
@@ -130,6 +134,21 @@ def _jumps(q, P, axes, closed):
             i = int(bad[0])
             return (f"coordinate {i} jumps by {big[i]:.3g} between neighbouring samples, more than half its extent "
                     f"{extent[i]:.3g}: a wrapped angle? give its period (period=…)")
+    return ""
+
+
+def _period_steps(diffs, P):
+    """The reason a set's unwrapped samples cannot be trusted with the periods P, or "": a periodic
+    coordinate that steps by a quarter period or more between neighbours (``diffs``: the
+    differences between neighbours, one array per direction of the set), where a step cannot be
+    told from a wrap (a period far smaller than the set, or a set far too coarse)."""
+    for dx in diffs:
+        step = np.max(np.abs(dx), axis=tuple(range(dx.ndim - 1)))
+        bad = np.flatnonzero((P > 0) & (step >= P / 4))
+        if bad.size:
+            i = int(bad[0])
+            return (f"coordinate {i} steps by {step[i]:.3g} between neighbouring samples, a quarter of its period "
+                    f"{P[i]:.3g} or more: a wrap cannot be told from a step (is the period right?)")
     return ""
 
 
@@ -258,8 +277,11 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=Non
         error, roundoff, tail_a, tail_q = spectral.loop_pairing_error(ah, qh, q.shape[0], absolute=(aa, aq), tails=True)
         if reason is None:
             # a jump of a wrapped coordinate is a discontinuity, whose spectrum already flags the set:
-            # the reason is sought only then (a third of the call's time at D = 2 otherwise)
-            reason = _jumps(r, P, (0,), closed=True) if tail_q > UNDER_RESOLVED else ""
+            # the reason is sought only then (a third of the call's time at D = 2 otherwise); a
+            # period the samples cannot tell from a step flags the set whatever its spectrum
+            reason = (_period_steps([np.diff(r, axis=0, append=r[:1]) + ramp / q.shape[0]], P)
+                      if P is not None else "")
+            reason = reason or (_jumps(r, P, (0,), closed=True) if tail_q > UNDER_RESOLVED else "")
         if ramp is not None and ramp.any():                    # the winding: ∮ A_i m P_i dτ, A's mean
             wind = np.abs(ramp) * np.max(np.abs(A), axis=0)
             value += np.sum(ramp * np.mean(A, axis=0))
@@ -391,7 +413,8 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
     qs, qt = spectral.chebyshev_derivative(qu, 0, cq0), spectral.chebyshev_derivative(qu, 1)
     cq2 = np.abs(spectral.chebyshev_coefficients(cq0, 1))
     tail_q = spectral.coefficient_tail(cq2)
-    reason = _jumps(qu, P, (0, 1), closed=False) if tail_q > UNDER_RESOLVED else ""   # (as for loops)
+    reason = _period_steps([np.diff(qu, axis=0), np.diff(qu, axis=1)], P) if P is not None else ""   # (as for loops)
+    reason = reason or (_jumps(qu, P, (0, 1), closed=False) if tail_q > UNDER_RESOLVED else "")
     out, omega = {}, {}
     if "noncanonical" in named or "corrected" in named:
         sy = _need(system, "system", "noncanonical" if "noncanonical" in named else "corrected")

@@ -29,7 +29,9 @@ This module makes that judgement a number::
    exponent reported is the stick's slope after the break; for a bounded error the late fit's.
 
 A series with non-finite values (a broken-down set) gets the law of its finite prefix; one with
-fewer than ``MIN_WINDOWS`` usable windows gets ``undetermined``.  The thresholds are validated on
+fewer than ``MIN_WINDOWS`` usable windows gets ``undetermined`` (``round-off`` where every value is
+at most ``roundoff``).  A window whose maximum is exactly 0 has no scale and is not usable: an error
+that alternates 2, 0, 2, 0, … (an anti-symplectic map) is not a growth from 0.  The thresholds are validated on
 5,000 synthetic series and on the project's known results (scripts/studies/growth_laws.py,
 docs/growth.md).
 """
@@ -150,10 +152,12 @@ def growth_law_of_maxima(ends, maxima, roundoff=ROUNDOFF, peak=None):
     good = np.isfinite(w) & np.isfinite(m) & (w > 0)
     w, m = w[good], m[good]
     peak = float(np.max(m)) if peak is None and m.size else (math.nan if peak is None else float(peak))
+    if np.any(m > 0):                       # a window that met only e = 0 exactly has no scale: not usable
+        w, m = w[m > 0], m[m > 0]
     if w.size < MIN_WINDOWS or not np.any(m > 0):
         law = "round-off" if m.size and np.all(m <= roundoff) else "undetermined"
         return GrowthLaw(law, math.nan, math.nan, float(w[0]) if w.size else math.nan, peak, tuple(w), tuple(m))
-    y = np.log(np.maximum(m, np.max(m) * 1e-12))    # (a window that met e = 0 exactly)
+    y = np.log(m)
     x = np.log(w)
     # the late law: the windows of the last LATE_DECADES (at least MIN_WINDOWS of them)
     late = max(0, min(int(np.searchsorted(x, x[-1] - LATE_DECADES * math.log(10.0))), w.size - MIN_WINDOWS))

@@ -97,6 +97,17 @@ def monitor_section():
     return out
 
 
+PERIODS = """
+## Periodic coordinates: `period=`
+
+`first_invariant(q, form, …, period=P)` and `second_invariant(…, period=P)` take coordinates that are angles or lie on a periodic domain: P is one number (every coordinate) or a 1-D list of one entry per coordinate, 0 or None where a coordinate is not periodic; anything else (a negative, a NaN, an array of two dimensions) is refused in one line. The samples may be wrapped (into [0, P) or anywhere): the differences between neighbours are taken into [−P/2, P/2) before the spectral derivative, and a loop that winds m times around coordinate i adds m·P_i·mean(A_i) exactly (docs/conventions.md, "Periodic coordinates"). A one-form (two-form) that is not periodic there is refused.
+
+A period is trusted only where the samples can tell a wrap from a step: a periodic coordinate that steps by a quarter of its period or more between neighbouring samples (a period far smaller than the set, such as `period=1e-12` on a unit circle, or a set far too coarse) makes the value under-resolved (resolution 1), with `reason` naming the coordinate, its step and its period. Before, the unit circle with `period=1e-12` gave I₁ = −6e-12 marked resolved where the value is −π (tests/test_audit_edges.py). `audit_map` refuses such a period before it runs, against the loop it builds; without a period, a coordinate that jumps by more than half its extent between neighbours is under-resolved with that reason (a wrapped angle).
+
+An invariant whose value is zero within its own error (|I| ≤ `error`, round-off included: I₁ of a closed one-form, dϑ = 0) has no relative error. A run records such an I(0) in the file's root attribute `absolute_invariants` (e.g. `"I1/noncanonical"`), and its error is then |I(t) − I(0)| in the summary (which says so), the plots, the growth laws and `PairRun.relative_error`.
+"""   # the conventions of period= and of exact zeros (no measurement: the tests hold them)
+
+
 def main():
     I1x, I2x, I1s, I2s = exact_values()
     I1x, I2x = float(I1x), float(I2x)
@@ -143,7 +154,7 @@ def main():
               "the round-off of the points themselves (their coordinates reach 184 after two maps, while I₁ "
               "is 2π). PoincareInvariants.jl's own Hénon test, on I₂ with finite differences, allows 5e-13 "
               "after one map and 5e-12 after two."]
-    text = "\n".join(lines) + "\n"
+    text = "\n".join(lines) + "\n" + PERIODS
     print(text)
     (ROOT / "docs" / "invariants.md").write_text(text)
 
