@@ -24,6 +24,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 import time
 
 import numpy as np
@@ -185,11 +186,12 @@ def _print_summary(summaries, out, n_outputs=None):
                     for inv, (t, base, most) in s.refined.items()]
             notes.append(f"  {_printable(s.pair)}: refined {' and '.join(sets)}; the new points, started at t = 0, "
                          f"took {catch_up:.1f} s to advance")
-        for inv, (t, bad, total) in s.unresolved_from.items():
+        for inv, (t, bad, total, why) in s.unresolved_from.items():
             at_most = s.refined.get(inv, (None, None, None))[2]
             notes.append(f"  * {s.pair}: the {'loop' if inv == 'I1' else 'surface'} was under-resolved at {bad} of "
                          f"{total} outputs (first at t = {t:g}); its {inv} errors are over the others only "
-                         + (f"(on {at_most:,} points, its refine_to: raise it or shorten the run)" if at_most else
+                         + (f"(why: {_printable(why)})" if why else
+                            f"(on {at_most:,} points, its refine_to: raise it or shorten the run)" if at_most else
                             "(refine the set, or let it refine itself with refine_to, or shorten the run)"))
     if n_outputs is not None and n_outputs < SHORT_SERIES and any(s.laws for s in summaries):
         notes.append(f"  growth laws from {n_outputs} outputs: round-off, linear and faster hold (94-100 % right on "
@@ -268,6 +270,10 @@ def cmd_run(args) -> int:
                     stop=STOP)
     if comm.rank == 0:
         code = _print_summary(summaries, out, scene.n_outputs)
+        zero = _absolute_invariants(out)
+        if zero:
+            print(f"note: {', '.join(zero)} {'is' if len(zero) == 1 else 'are'} zero at t = 0 within {'its' if len(zero) == 1 else 'their'} "
+                  "error (a closed one-form?): the error shown is the absolute |I(t) − I(0)|, a relative one has no scale")
         absolute = _energy_absolute_points(out)
         if absolute:
             print(f"note: energy is the absolute error |H − H0| at the {absolute} point{'s' if absolute > 1 else ''} "
@@ -301,6 +307,17 @@ def _equilibrium_note(scene) -> str:
             f"down (docs/equilibria.md){notes}")
 
 
+def _absolute_invariants(path) -> list:
+    """The invariants whose I(0) the file records as zero within its error: their error is absolute."""
+    try:
+        import h5py
+        from .service.statuses import absolute_invariants
+        with h5py.File(path, "r") as f:
+            return sorted(absolute_invariants(f))
+    except (OSError, ValueError):
+        return []
+
+
 def _energy_absolute_points(path) -> int:
     """How many points' energy error the file records as absolute (H0 = 0): its root attribute."""
     try:
@@ -322,8 +339,9 @@ def _print_user_code():
 
 def _map_audit(args):
     """``poincare audit --map``: canonical black-box maps by integrators.audit.audit_map."""
+    import numpy as np
     from .audit import examples
-    from .audit.maps import audit_map
+    from .audit.maps import audit_map, check_arguments
     from .service.plugins import load_callable
     if args.candidate is not None:
         raise ValueError("give either a CANDIDATE (tableau or step(q, p, lam, h, system) map on a scene) or --map, "
@@ -331,40 +349,53 @@ def _map_audit(args):
     for name in ("projection",):
         if getattr(args, name) is not None:
             raise ValueError(f"--{name} applies to tableaus, not to --map")
+    shipped = [spec for spec in args.map if spec in examples.EXAMPLES]
+    if shipped and args.theta is not None:
+        raise ValueError(f"--theta takes noncanonical maps step(q, h) -> q of your own; '{shipped[0]}' is a "
+                         "shipped canonical example")
+    if args.k is not None and not shipped:
+        raise ValueError("--k sizes the shipped examples (" + ", ".join(_EXAMPLE_NAMES) + "), not a map of your own")
+    ex = examples.defaults(shipped[0], args.k) if shipped else None
+    theta = None if args.theta is None else load_callable(args.theta, "--theta", confined=False)
+    if args.point is not None:
+        point = _read_point(args.point, theta is not None)
+    elif ex is None:
+        raise ValueError("--map of your own needs --point: a .npz file with arrays x0 and v0 (with --theta: q0), "
+                         "or file.py:function returning (x0, v0) (with --theta: q0)")
+    h = args.h if args.h is not None else (None if ex is None else ex["h"])
+    if h is None:
+        raise ValueError("--map of your own needs --h, the step size")
+    radius = args.radius if args.radius is not None else (0.1 if ex is None else ex["radius"])
+    kw = dict(steps=args.steps if args.steps is not None else 100, loop_points=args.loop_points,
+              radius=radius, surface=args.surface, defect_points=args.points,
+              levels=args.levels if args.levels is not None else 3, probes=args.probes)
+    if args.output_every is not None:
+        kw["output_every"] = args.output_every
+    # every size judged before an example or a set is built (an example's point alone is 16 bytes × k)
+    n = 2 * max(examples.defaults(s, args.k)["k"] for s in shipped) if args.point is None else (np.size(point) if theta is not None else 2 * np.size(point[0]))
+    check_arguments(n, h, noncanonical=theta is not None, names=MAP_OPTIONS, **kw)
     maps, info = {}, None
     for spec in args.map:
         if spec in examples.EXAMPLES:
-            if args.theta is not None:
-                raise ValueError(f"--theta takes noncanonical maps step(q, h) -> q of your own; '{spec}' is a "
-                                 "shipped canonical example")
             step, info_k = examples.example(spec, args.k)
             info = info or info_k
         else:
             step = load_callable(spec, "step map", confined=False)
         maps[spec] = step
-    theta = None if args.theta is None else load_callable(args.theta, "--theta", confined=False)
-    if args.point is not None:
-        point = _read_point(args.point, theta is not None)
-    elif info is not None and theta is None:
+    if args.point is None:
         point = info["point"]
-    else:
-        raise ValueError("--map of your own needs --point: a .npz file with arrays x0 and v0 (with --theta: q0), "
-                         "or file.py:function returning (x0, v0) (with --theta: q0)")
     period = args.period if args.period is not None else (None if info is None else [info["period"]])
     if period is not None and len(period) == 1:
         period = period[0]
-    h = args.h if args.h is not None else (None if info is None else info["h"])
-    if h is None:
-        raise ValueError("--map of your own needs --h, the step size")
-    radius = args.radius if args.radius is not None else (0.1 if info is None else info["radius"])
-    kw = dict(steps=args.steps if args.steps is not None else 100, loop_points=args.loop_points,
-              radius=radius, plane=args.plane, surface=args.surface, period=period,
-              defect_points=args.points, levels=args.levels if args.levels is not None else 3, probes=args.probes)
-    if args.output_every is not None:
-        kw["output_every"] = args.output_every
+    kw.update(plane=args.plane, period=period)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     energy = None if args.energy is None else load_callable(args.energy, "--energy", confined=False)
     return audit_map(maps, point, h, progress=say, theta=theta, energy=energy, **kw)
+
+
+MAP_OPTIONS = {"h": "--h", "steps": "--steps", "output_every": "--output-every", "loop_points": "--loop-points",
+               "radius": "--radius", "surface": "--surface", "defect_points": "--points", "levels": "--levels",
+               "probes": "--probes", "period": "--period", "k": "--k"}   # audit_map's arguments as the command names them
 
 
 def _read_point(spec, noncanonical=False):
@@ -602,7 +633,11 @@ def main(argv=None) -> int:
         _STOPPED[0] = threading.Lock()
         undo_watchdog = _start_watchdog(rank, _STOPPED[0]) if rank == 0 else (lambda: None)
     try:
-        return args.func(args)
+        # no numpy warning reaches the terminal: an overflow or a NaN in a user's map, a tableau or a
+        # set is reported where it matters (a breakdown, a failed step, an under-resolved set)
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return args.func(args)
     except OutputError as exc:
         print(f"poincare: error: {_printable(exc)}" + (f" (rank {rank})" if rank else ""), file=sys.stderr, flush=True)
         sys.stdout.flush()

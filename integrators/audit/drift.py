@@ -29,7 +29,9 @@ def drift_verdict(t, err, broke, resolution=0.0, law=None):
     if broke:
         return float(np.nanmax(err, initial=0.0)) if np.isfinite(err).any() else math.nan, math.nan, "broke down"
     emax = float(np.max(err))
-    rate = float(np.polyfit(t - t[0], err, 1)[0]) if t.size > 1 else math.nan
+    span = t[-1] - t[0] if t.size > 1 else 0.0
+    # the fit in units of the run's length: t of tiny steps would underflow in polyfit's scaling
+    rate = float(np.polyfit((t - t[0]) / span, err, 1)[0] / span) if span > 0 else math.nan
     if resolution > RESOLVED and emax > ROUNDOFF:
         return emax, rate, "under-resolved"
     law = growth_law(t, err) if law is None else law

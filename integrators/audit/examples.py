@@ -174,6 +174,18 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
 EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2")
 
 
+def defaults(name, k=None):
+    """A shipped example's size and audit defaults before anything is built: {k, h, radius} (``k``
+    checked: a positive whole number; default 1,024 pendula or 10,000 particles)."""
+    if name not in EXAMPLES:
+        raise ValueError(f"unknown example '{name}' (choose one of {', '.join(EXAMPLES)})")
+    family = name.split("-")[0]
+    if k is not None and (isinstance(k, bool) or int(k) != k or k < 1):
+        raise ValueError(f"--k must be a positive whole number, got {k}")
+    k = (1024 if family == "pendula" else 10000) if k is None else int(k)
+    return {"k": k, "h": 0.1, "radius": 0.01 if family == "pendula" else 0.1}
+
+
 def example(name, k=None):
     """A shipped example by name (:data:`EXAMPLES`): (step, info) with info's ``point`` (x0, v0), ``h``
     and ``period`` the audit's defaults.  ``k``: pendula (default 1,024) or particles (default 10,000).
@@ -182,20 +194,14 @@ def example(name, k=None):
     seed 1), h = 0.1, loop radius 0.01 (at 0.1 the loop of 4,096 pendula stretches out of resolution
     within 100 steps: near-separatrix pendula; the monitor says so).  pic (cubic B-splines) and pic1
     (linear): 64 cells on [0, 4π), a Landau-damping start (α = 0.01, mode 1), h = 0.1, radius 0.1."""
-    if name not in EXAMPLES:
-        raise ValueError(f"unknown example '{name}' (choose one of {', '.join(EXAMPLES)})")
     family, method = name.split("-")
-    if k is not None and (int(k) != k or k < 1):
-        raise ValueError(f"--k must be a positive whole number, got {k}")
+    k = defaults(name, k)["k"]
     if family == "pendula":
-        k = 1024 if k is None else int(k)
         step, info = pendulum_array(k, method=method)
         rng = np.random.default_rng(1)
         info["point"] = (rng.uniform(0.0, TWO_PI, k), 0.5 * rng.standard_normal(k))
     else:
-        k = 10000 if k is None else int(k)
         step, info = pic(particles=k, degree=3 if family == "pic" else 1, method=method)
         info["point"] = info["landau"]()
-    info["h"] = 0.1
-    info["radius"] = 0.01 if family == "pendula" else 0.1   # pendula: a 0.1 loop of 4,096 stretches out of resolution
+    info.update({key: v for key, v in defaults(name, k).items() if key != "k"})   # pendula: radius 0.01 (docstring)
     return step, info

@@ -27,9 +27,89 @@ import numpy as np
 from ..kernel import COMPLEX_STEP as CS_STEP
 from .defect import DEFECT_FLOOR, FD_ORDER8, FD_STEP, fit_order
 from .drift import ROUNDOFF, RESOLVED, drift_verdict
+from invariants.forms import MIN_POINTS
 
 DENSE_UP_TO = 32          # phase-space dimensions up to which the defect takes the dense Jacobian
 PROBES = 8                # probe pairs of the matrix-free defect (docs/audit.md: how many are enough)
+METHODS = ("auto", "complex step", "central differences")   # how the defect differentiates a map
+STATE_COPIES = 8          # the drift's peak memory in copies of the sets' state (7 measured at d = 8,192:
+                          # 7.4 GiB for a 1.07 GB state; the map's temporaries and the invariants' FFTs)
+
+
+NAMES = {key: key for key in ("h", "steps", "output_every", "loop_points", "radius", "surface", "defect_points",
+                               "levels", "probes", "method", "period", "k")}   # how audit_map's caller names them
+
+
+def _whole(value, name, least=1):
+    """``value`` as an int of at least ``least``; a one-line ValueError naming ``name`` otherwise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(value) or int(value) != value or value < least:
+        raise ValueError(f"{name} must be a whole number of at least {least}, got {value!r}")
+    return int(value)
+
+
+def check_arguments(n, h, *, steps=100, output_every=None, loop_points=1024, radius=0.1, surface=None,
+                    defect_points=4, levels=3, probes=PROBES, method="auto", noncanonical=False, names=None):
+    """The one validation of a map audit's arguments and sizes, shared by :func:`audit_map` and
+    ``poincare audit --map`` (which calls it before it builds an example): a one-line ValueError
+    naming the argument as the caller does (``names``: {argument: name}, e.g. ``--loop-points``),
+    and the memory judged from the sizes alone, before anything is allocated.  ``n``: the phase-space dimension (2k; d with a
+    one-form).  Returns the arguments made whole: (h, steps, every, loop_points, surface,
+    defect_points, levels, probes)."""
+    nm = {**NAMES, **(names or {})}
+    n = _whole(n, "the dimension")
+    if noncanonical and n % 2:
+        raise ValueError(f"a one-form on d = {n} coordinates (odd) is degenerate: dϑ has a kernel and no map can "
+                         "be symplectic for it; a degenerate Lagrangian ϑ(q)·q̇ − H(q) needs an even d")
+    if isinstance(h, (bool, np.bool_)) or not isinstance(h, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{nm['h']} must be a number, got {h!r}")
+    h = float(h)
+    steps = _whole(steps, nm["steps"])
+    every = max(1, steps // 50) if output_every is None else _whole(output_every, nm["output_every"])
+    loop_points = _whole(loop_points, nm["loop_points"], MIN_POINTS)
+    levels = _whole(levels, nm["levels"])
+    defect_points = _whole(defect_points, nm["defect_points"])
+    probes = _whole(probes, nm["probes"])
+    if defect_points > loop_points:
+        raise ValueError(f"{nm['defect_points']} = {defect_points} is more than the loop's {loop_points} points "
+                         "(the defect is taken at points of the loop)")
+    if not math.isfinite(h) or h == 0.0:
+        raise ValueError(f"{nm['h']} must be finite and non-zero, got {h!r}")
+    smallest = abs(h) * 2.0 ** (1 - levels)
+    if smallest < np.finfo(float).tiny:
+        raise ValueError(f"{nm['h']} = {h!r} with {nm['levels']} = {levels}: the smallest step size h/2^{levels - 1} = "
+                         f"{smallest:.3g} is below the smallest normal double ({np.finfo(float).tiny:.3g}): no "
+                         "step map can resolve it")
+    if not math.isfinite(h * steps):
+        raise ValueError(f"{nm['h']} × {nm['steps']} = {h!r} × {steps} is not a finite time")
+    if isinstance(radius, (bool, np.bool_)) or not isinstance(radius, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(radius) or radius <= 0:
+        raise ValueError(f"{nm['radius']} must be a positive number (the loop's radius in phase space), got {radius!r}")
+    if method not in METHODS:
+        raise ValueError(f"{nm['method']} must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    if surface is not None:
+        if np.ndim(surface) != 1 or len(surface) != 2:
+            raise ValueError(f"{nm['surface']} must be (n_sigma, n_tau), two whole numbers, got {surface!r}")
+        surface = tuple(_whole(x, f"{nm['surface']}'s {w}", MIN_POINTS) for x, w in zip(surface, ("n_sigma", "n_tau")))
+    rows = loop_points + (0 if surface is None else surface[0] * surface[1])
+    dense = n <= DENSE_UP_TO
+    needs = {f"the sets ({rows:,} points of {n:,} coordinates, {STATE_COPIES} copies while advanced)":
+             STATE_COPIES * 8.0 * rows * n,
+             f"the defect ({defect_points} points × {n if dense else 2 * probes} directions)":
+             2 * STATE_COPIES * 16.0 * defect_points * (n if dense else 2 * probes) * n}
+    if noncanonical and surface is not None:
+        needs[f"the surface's two-form ({surface[0] * surface[1]:,} points of {n} × {n})"] = \
+            4 * 8.0 * surface[0] * surface[1] * n * n
+    from ..service.scene import available_memory
+    free = available_memory()
+    what, need = max(needs.items(), key=lambda kv: kv[1])
+    fewer = (f"fewer {nm['defect_points']}" if "defect" in what else
+             f"fewer {nm['loop_points']}" if surface is None or loop_points >= surface[0] * surface[1] else
+             f"a smaller {nm['surface']}")
+    if free is not None and need > free:
+        raise ValueError(f"the audit needs about {need / 2**30:,.1f} GiB of memory for {what}; this machine has "
+                         f"{free / 2**30:,.1f} GiB available: use {fewer}{' or a smaller ' + nm['k'] if nm['k'] != 'k' else ''}")
+    return h, steps, every, loop_points, surface, defect_points, levels, probes
 
 
 def _as_map(step, name="map"):
@@ -287,37 +367,41 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
         for h·2⁻ˡ, l < ``levels``, by :func:`map_defect`
     Returns the JSON-able report of :func:`integrators.audit.audit` (``text_report``,
     ``plot_report`` read it), with the loop's description under ``"sets"``.
+
+    Every argument and size is checked first (:func:`check_arguments`; the plane must carry area of
+    the form, a period must be one the loop's steps can tell from a wrap): a one-line ValueError,
+    nothing allocated.  An under-resolved drift carries its ``under_resolved_reason``.
     """
     maps = step if isinstance(step, dict) else {name: step}
+    if not maps:
+        raise ValueError("no step map given (an empty dict)")
     for nm, s in maps.items():
         _as_map(s, nm)
+    if theta is not None and not callable(theta):
+        raise TypeError(f"theta must be callable as theta(q) -> (n, d), got {type(theta).__name__}")
     z0 = _start(point, theta)
-    h = float(h)
-    if not math.isfinite(h) or h == 0.0:
-        raise ValueError(f"h must be finite and non-zero, got {h}")
-    steps = int(steps)
-    every = max(1, steps // 50) if output_every is None else int(output_every)
-    if steps < 1 or every < 1:
-        raise ValueError("steps and output_every must be positive")
     n = z0.size
     k = n // 2
+    h, steps, every, loop_points, surface, defect_points, levels, probes = check_arguments(
+        n, h, steps=steps, output_every=output_every, loop_points=loop_points, radius=radius, surface=surface,
+        defect_points=defect_points, levels=levels, probes=probes, method=method, noncanonical=theta is not None)
     from invariants.forms import _periods
     P = _periods(period, n if theta is not None else k)
-    if theta is not None:
-        if not callable(theta):
-            raise TypeError(f"theta must be callable as theta(q) -> (n, d), got {type(theta).__name__}")
-        if surface is not None and n > 2 * DENSE_UP_TO:
-            raise ValueError(f"a surface of a noncanonical map takes Ω = Dϑᵀ − Dϑ, {n} × {n} a point: up to "
-                             f"d = {2 * DENSE_UP_TO}; audit the loop (surface=None)")
+    if theta is not None and surface is not None and n > 2 * DENSE_UP_TO:
+        raise ValueError(f"a surface of a noncanonical map takes Ω = Dϑᵀ − Dϑ, {n} × {n} a point: up to "
+                         f"d = {2 * DENSE_UP_TO}; audit the loop (surface=None)")
     D = _plane(n, plane, directions, canonical=theta is None)
-    loop = _loop(z0, D, float(radius), int(loop_points))
+    _check_area(D, z0, k, theta, method)
+    loop = _loop(z0, D, float(radius), loop_points)
     sets = {"I1": loop}
     if surface is not None:
         sets["I2"] = _surface(z0, D, float(radius), *surface).reshape(-1, n)
+    if P is not None:
+        _check_period(loop, P if theta is not None else np.concatenate([P, np.zeros(k)]))
     shapes = {"I1": loop.shape, "I2": None if surface is None else (int(surface[0]), int(surface[1]), n)}
     form = "canonical" if theta is None else "noncanonical"
-    hs = [h * 2.0 ** -l for l in range(int(levels))]
-    sel = np.linspace(0, loop.shape[0], int(defect_points), endpoint=False).astype(int)
+    hs = [h * 2.0 ** -l for l in range(levels)]
+    sel = np.linspace(0, loop.shape[0], defect_points, endpoint=False).astype(int)
     report = {"scene": name if not isinstance(step, dict) else "maps", "h": h, "steps": steps, "T": h * steps,
               "system": f"canonical map, k = {k} ({2 * k}-dimensional phase space)" if theta is None else
               f"noncanonical map with a one-form of code, d = {n}",
@@ -330,14 +414,44 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
         entry = {"name": nm, "role": "candidate", "kind": f"{form} map", "breakdown_step": None, "drift": {},
                  "t": [], "errors": {}, "defect": {}, "jacobian": None}
         advance = _advance(s, k, h) if theta is None else _rows(s, h)
-        _drift(entry, advance, sets, shapes, lambda part, key: _invariants(part, k, P, key, theta), form,
-               steps, h, every, progress, _energy(energy, k, theta))
-        entry["defect"], entry["jacobian"] = _defect_study(s, loop[sel], hs, probes, method, seed,
-                                                           None if progress is None else
-                                                           (lambda hk, nm=nm: progress(f"{nm}: one-step defect at h = {hk:g}")),
-                                                           theta)
+        with np.errstate(all="ignore"):      # a map's overflow is its breakdown or its NaN defect: reported, not warned
+            _drift(entry, advance, sets, shapes, lambda part, key: _invariants(part, k, P, key, theta), form,
+                   steps, h, every, progress, _energy(energy, k, theta))
+            entry["defect"], entry["jacobian"] = _defect_study(
+                s, loop[sel], hs, probes, method, seed,
+                None if progress is None else (lambda hk, nm=nm: progress(f"{nm}: one-step defect at h = {hk:g}")), theta)
         report["candidates"].append(entry)
     return report
+
+
+def _check_area(D, z0, k, theta, method):
+    """Refuse a plane that carries no area of the form audited (ω(d₁, d₂) = 0 at the loop's centre):
+    every loop there has I₁ = 0 for every map, and a relative error has no scale."""
+    if theta is None:
+        o, size = _omega(D[0], D[1], k)
+        hint = "; turn it in a position and its own momentum, plane=(i, k + i), or leave plane out"
+    else:
+        JD, _ = row_jvp(_one_form(theta), z0[None], D[None], method)
+        a, b, ja, jb = D[0], D[1], JD[0, 0], JD[0, 1]
+        o, size = float(b @ ja - a @ jb), float(np.abs(b * ja).sum() + np.abs(a * jb).sum())
+        hint = " at the point; choose two coordinates that dϑ pairs"
+        if not math.isfinite(o):
+            raise ValueError("theta(q) is not finite near the point (its derivative there is not finite)")
+    if abs(o) <= 1e-12 * max(size, 1e-300):
+        raise ValueError(f"the loop's plane carries no area of the form: {'ω' if theta is None else 'dϑ'}(d₁, d₂) = "
+                         f"{o:.3g}, so I₁ = 0 for every map and no relative error exists{hint}")
+
+
+def _check_period(loop, P):
+    """Refuse a period that the loop's own sampling cannot tell from a wrap: a periodic coordinate
+    whose step between neighbouring points of the (unwrapped) loop is a quarter period or more."""
+    step = np.max(np.abs(np.diff(loop, axis=0, append=loop[:1])), axis=0)
+    bad = np.flatnonzero((P > 0) & (step >= P / 4))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"period {P[i]:.6g} of coordinate {i} is not a period of this loop: its points step by up to "
+                         f"{step[i]:.3g} there, a quarter of the period or more, so a wrap cannot be told from a step "
+                         "(give the coordinate's real period, or 0 where it is not periodic)")
 
 
 def _sets_description(loop_points, radius, plane, directions, surface, P, canonical):
@@ -356,6 +470,11 @@ def _start(point, theta):
         if z0.ndim != 1 or z0.size < 2:
             raise ValueError(f"point must be q0, a 1-D array of the map's d ≥ 2 coordinates, got shape {z0.shape}")
     else:
+        if (np.ndim(point) != 2 if isinstance(point, np.ndarray) else not isinstance(point, (tuple, list))) \
+                or len(point) != 2:
+            raise ValueError(f"point must be (x0, v0), two 1-D arrays of the same length k, got "
+                             f"{'one array of shape ' + str(np.shape(point)) if isinstance(point, np.ndarray) else type(point).__name__}"
+                             " (a noncanonical map's q0 goes with theta=)")
         x0, v0 = (np.asarray(a, dtype=float) for a in point)
         if x0.ndim != 1 or x0.shape != v0.shape or x0.size == 0:
             raise ValueError(f"point must be (x0, v0), two 1-D arrays of the same length k, got shapes {x0.shape}, "
@@ -422,12 +541,17 @@ def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progr
     z = np.concatenate([sets[key] for key in sets], axis=0)
     cut = np.cumsum([sets[key].shape[0] for key in sets])[:-1]
     t, values, res = [0.0], {key: [] for key in sets}, {key: 0.0 for key in sets}
+    why = {key: "" for key in sets}          # the first reason a set was under-resolved, where one is given
 
     def record(z):
         for key, part in zip(sets, np.split(z, cut)):
             v = invariant(part.reshape(shapes[key]), key)
             values[key].append(v.value)
             res[key] = max(res[key], v.resolution)
+            if v.under_resolved and not why[key]:
+                why[key] = f"from t = {t[-1]:g}: " + (
+                    v.reason or f"the set's monitor reads {v.resolution:.2g} (> {RESOLVED:g}): more loop points, "
+                                "a smaller radius or fewer steps")
 
     record(z)
     if energy is not None:
@@ -462,6 +586,6 @@ def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progr
             "near_floor": bool(ROUNDOFF < emax <= 10 * ROUNDOFF) if math.isfinite(emax) else False,
             "growth_law": None if g is None else g.law, "growth_exponent": None if g is None else g.exponent,
             "growth_exponent_error": None if g is None else g.exponent_error, "growth_onset": None if g is None else g.onset,
-            "value_at_start": values[key][0]}
+            "value_at_start": values[key][0], "under_resolved_reason": why[key] or None}
         entry["errors"][f"{key}/{form}"] = err.tolist()
     entry["t"], entry["breakdown_step"] = t.tolist(), broke

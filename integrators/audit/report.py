@@ -94,6 +94,8 @@ def text_report(report) -> str:
                     "law may be round-off's, not the method's" if r.get("near_floor") else "")
             lines.append(f"    {key:18s} {_fmt(r['max_error']):>9s} {_fmt(r['drift_rate'], '+.1e'):>9s} "
                          f"{_fmt(r['resolution']):>9s}  {r['verdict']}{grow}{near}")
+            if r["verdict"] == "under-resolved" and r.get("under_resolved_reason"):
+                lines.append(f"      why: {r['under_resolved_reason']}")
         if c.get("energy_error"):          # a step map's audit given an energy function
             lines.append(f"    {'energy':18s} {_fmt(max(c['energy_error'])):>9s}  (max |H − H(0)|/|H(0)| over the "
                          "points and outputs)")
