@@ -359,7 +359,7 @@ def test_a_canonical_map_scene_without_the_period_is_under_resolved_not_wrong(tm
     (("h = 0.1", "h = 0.1\nforms = [\"canonical\", \"noncanonical\"]"), "the canonical form only .v·dx."),
     (('h = 0.1', 'h = 0.1\ndiagnostics = ["constraint"]'), "energy error only"),
     (('period = 6.283185307179586', 'period = [1.0, 2.0]'), "2 entries for 6 positions"),
-    (('period = 6.283185307179586', 'period = -1.0'), "system.period of coordinate 0"),
+    (('period = 6.283185307179586', 'period = -1.0'), "system.period must be a positive number"),
     (('energy = "ring.py:energy"', 'energy = "ring.py:nothere"'), "system.energy.*no function 'nothere'"),
     (('degrees_of_freedom = 6', 'degrees_of_freedom = 6\ntheta = ["x"]'), "system.theta cannot go with"),
     (('center = "ring.py:start"', 'center = "ring.py:energy"'), "loop.params.center.*failed"),

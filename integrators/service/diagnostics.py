@@ -136,22 +136,23 @@ class Diagnostics:
         return {key: float(out[i]) for what, key, i in names if what in self.scene.diagnostics}
 
     def invariant(self, spec, form, q, p, lam, live):
-        """(value, resolution, computed) of one form of one set's invariant; points shaped as the set's grid.
+        """(value, resolution, computed, reason) of one form of one set's invariant; points shaped as the
+        set's grid (``reason``: InvariantValue.reason, "" where the spectrum speaks for itself).
 
         A set with a broken-down (frozen) point is no longer an advected set: not computed, NaN.
         Points that are not finite give NaN, not computed, too.
         """
         import invariants
         if not live.all():
-            return np.nan, np.nan, False
+            return np.nan, np.nan, False, ""
         fn = invariants.first_invariant if spec.invariant == "I1" else invariants.second_invariant
         with np.errstate(all="ignore"):
             try:
                 v = fn(q, _computed(self.system, form), system=self.system, p=p, lam=lam, h=self.scene.h,
                        period=_period(self.system))
             except ValueError:          # non-finite values
-                return np.nan, np.nan, False
-        return v.value, v.resolution, True
+                return np.nan, np.nan, False, ""
+        return v.value, v.resolution, True, v.reason
 
     def combine(self, t, errors, values) -> dict:
         """The row at time t from the blocks' ``point_errors`` (a list) and the tasks' ``values``
@@ -194,11 +195,16 @@ class Diagnostics:
                     got = fn(q, [_computed(self.system, f) for f in forms], system=self.system, p=p, lam=lam,
                              h=self.scene.h, period=_period(self.system))
                     got = {f: got[_computed(self.system, f)] for f in forms}
-                    return {(spec.invariant, f): (got[f].value, got[f].resolution, True, True) for f in forms}
+                    out = {(spec.invariant, f): (got[f].value, got[f].resolution, True, True) for f in forms}
+                    return _with_reason(out, spec.invariant, [got[f] for f in forms])
                 except ValueError:      # a non-finite field: each form on its own says which fail
                     pass
-        return {(spec.invariant, form): self.invariant(spec, form, q, p, lam, live) + (bool(live.all()),)
-                for form in forms}
+        got = {form: self.invariant(spec, form, q, p, lam, live) for form in forms}
+        out = {(spec.invariant, form): v[:3] + (bool(live.all()),) for form, v in got.items()}
+        why = next((v[3] for v in got.values() if v[3]), "")
+        if why:
+            out[(spec.invariant, "reason")] = why
+        return out
 
     def row(self, t, q, p, lam, live) -> dict:
         """The whole row of points (n, d) on one process."""
@@ -208,6 +214,38 @@ class Diagnostics:
             values.update(self.set_values(spec, self.scene.forms, q[rows].reshape(shp), p[rows].reshape(shp),
                                           lam[rows].reshape(shp), live[rows]))
         return self.combine(t, [self.point_errors(q, p, live)], values)
+
+
+def _with_reason(values, inv, got):
+    """``values`` with (inv, "reason"): why the set was under-resolved where its spectrum cannot say
+    (InvariantValue.reason: a wrapped coordinate without its period, a period the samples cannot
+    tell from a step), when a form gives one; rank 0 keeps the first as the pair's attribute."""
+    why = next((v.reason for v in got if v.reason), "")
+    if why:
+        values[(inv, "reason")] = why
+    return values
+
+
+def zero_invariants(scene, system, q0) -> list:
+    """['I1/form', …]: the scene's invariants whose value at t = 0 is zero within its own error
+    (|I(0)| ≤ InvariantValue.error, round-off included), such as I₁ of a closed one-form (dϑ = 0):
+    their error is reported as |I(t) − I(0)|, since a relative one has no scale (statuses.relative_error)."""
+    import invariants
+    out = []
+    p, lam = system.theta(q0), np.zeros_like(q0)
+    for spec, rows in scene.sample_sets:
+        shp = spec.grid + (q0.shape[1],)
+        fn = invariants.first_invariant if spec.invariant == "I1" else invariants.second_invariant
+        for form in scene.forms:
+            with np.errstate(all="ignore"):
+                try:
+                    v = fn(q0[rows].reshape(shp), _computed(system, form), system=system, p=p[rows].reshape(shp),
+                           lam=lam[rows].reshape(shp), h=scene.h, period=_period(system))
+                except ValueError:        # not finite: the run's own rows say so
+                    continue
+            if abs(v.value) <= v.error:
+                out.append(f"{spec.invariant}/{form}")
+    return out
 
 
 def energy_scale(H0):

@@ -359,6 +359,8 @@ def _open_output(comm, scene, path, system, q0, resume, grown_from, version) -> 
                     if "energy" in scene.diagnostics:       # where a relative energy error has no scale
                         from .diagnostics import _scalars
                         output.note_energy_scale(f, int(np.count_nonzero(_scalars(system, q0)[0] == 0)), n)
+                    from .diagnostics import zero_invariants         # where a relative invariant error has none
+                    output.note_absolute_invariants(f, zero_invariants(scene, system, q0))
                     for pair in scene.pairs:
                         todo.append(resumable.restart_pair(f, pair.name, scene.output_every,
                                                         finished_too=grown_from is not None))

@@ -17,13 +17,18 @@ Layout (format ``poincare/2``)::
                                            attrs: points (the scene's own), refine_to
         energy_error        (n,)       max over points of |H − H₀|/|H₀| (|H − H₀| where H₀ = 0: the
                                        root attributes energy_error, energy_absolute_points say so)
+                                       (an invariant whose I(0) is zero within its error, a closed
+                                       one-form's I₁: its error is |I − I(0)|, the root attribute
+                                       absolute_invariants lists it, e.g. "I1/noncanonical")
         momentum_error      (n,)       max over points of |P − P₀|
         constraint_error    (n,)       max over points of |p − ϑ(q)|
         breakdown_time      (npoints,) per point, inf = never (loop points first, then the surface row by row)
         points/loop, points/surface    (n, N, d), (n, nσ, nτ, d) only with run.store_points
         checkpoint/a, checkpoint/b     two alternating copies of the integrator state (see below; with
                                        per-rank checkpoints, virtual datasets over slab files beside the file)
-        attrs: status, wall_time [s], under_resolved_from/I1, under_resolved_from/I2 (first output time at
+        attrs: status, wall_time [s], under_resolved_reason/I1, …/I2 (why a set was under-resolved where its
+               spectrum cannot say: a wrapped coordinate without its period; absent otherwise),
+               under_resolved_from/I1, under_resolved_from/I2 (first output time at
                which the set was under-resolved; absent while it is resolved)
 
 ``status`` is written when a pair finishes and is one of (see :data:`STATUSES`)
@@ -160,6 +165,12 @@ def note_energy_scale(f, absolute, points):
     f.attrs["energy_absolute_points"] = absolute
     f.attrs["energy_error"] = "max over live points of |H - H0|/|H0|" + (
         f"; |H - H0| (absolute) at the {absolute} of {points} points where H0 = 0" if absolute else "")
+
+
+def note_absolute_invariants(f, keys):
+    """The root attribute ``absolute_invariants``: the invariants ('I1/form' …) whose I(0) is zero
+    within its error, whose error is then |I(t) − I(0)| (statuses.relative_error)."""
+    f.attrs["absolute_invariants"] = " ".join(sorted(keys))
 
 
 def pair_group(f, name):

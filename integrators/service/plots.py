@@ -58,7 +58,7 @@ def _grid(run, inv, form, out):
             pr = run.pairs.get(pair_name(t, p))
             values = None if pr is None else (pr.I1 if inv == "I1" else pr.I2).get(form)
             if values is not None:
-                rel = np.asarray(relative_error(values), dtype=float)
+                rel = np.asarray(relative_error(values, f"{inv}/{form}" in pr.absolute), dtype=float)
                 ax.semilogy(pr.t, np.where(rel > 0, rel, np.nan), lw=0.9, ms=3,   # zeros (t = 0) not drawn
                             marker="." if np.count_nonzero(rel > 0) < 30 else None)
                 if rel.size > 1 and not np.any(rel[1:] > 0) and np.all(np.isfinite(rel)):

@@ -84,6 +84,11 @@ def load_callable(spec: str, what: str = "function", base: str | Path | None = N
         module = sys.modules.get(key)
         from .stop import guarded
         if module is None:
+            # as a script: the file's folder on the import path, so that it can import a module beside it
+            # (at import or inside its functions); only the folder the code was taken from
+            folder = str(found.parent if found.name != "__init__.py" else found.parent.parent)
+            if folder not in sys.path:
+                sys.path.append(folder)
             spec_ = importlib.util.spec_from_file_location(key, found)
             module = importlib.util.module_from_spec(spec_)
             sys.modules[key] = module

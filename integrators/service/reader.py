@@ -9,7 +9,7 @@ import numpy as np
 
 from .files import BusyFile, DamagedFile, _read, open_file, plain_error, size_limit
 from .output import FORMAT, pair_name, split_pair_name
-from .statuses import relative_error
+from .statuses import absolute_invariants, relative_error
 
 @dataclasses.dataclass
 class PairRun:
@@ -40,6 +40,7 @@ class PairRun:
     under_resolved_from: dict = dataclasses.field(default_factory=dict)
     growth: dict = dataclasses.field(default_factory=dict)
     points_used: dict = dataclasses.field(default_factory=dict)
+    absolute: frozenset = frozenset()     # 'I1/form' … whose I(0) is zero within its error: absolute errors
 
     def __repr__(self):
         t = f"t = {self.t[0]:g} … {self.t[-1]:g}" if self.t.size else "no outputs"
@@ -49,7 +50,8 @@ class PairRun:
                 f"{self.breakdown_time.size} points broke down>")
 
     def relative_error(self, inv="I1", form="noncanonical"):
-        """|I(t) − I(0)| / |I(0)| of one invariant ("I1" or "I2") and form (:func:`relative_error`);
+        """|I(t) − I(0)| / |I(0)| of one invariant ("I1" or "I2") and form (:func:`relative_error`;
+        |I(t) − I(0)| where I(0) is zero within its error: ``absolute``);
         a ValueError names an invariant or form the run does not hold."""
         if inv not in ("I1", "I2"):
             raise ValueError(f"invariant {inv!r}: choose 'I1' (the loop's) or 'I2' (the surface's)")
@@ -57,7 +59,7 @@ class PairRun:
         if form not in values:
             held = ", ".join(sorted(values)) or "none: the scene has no " + ("loop" if inv == "I1" else "surface")
             raise ValueError(f"{inv} form {form!r} is not in this run (it holds: {held})")
-        return relative_error(values[form])
+        return relative_error(values[form], f"{inv}/{form}" in self.absolute)
 
     def to_xarray(self, forms=None):
         """The pair as an ``xarray.Dataset`` over time ``t`` (and ``form``, ``point``): ``I1``, ``I2``
@@ -199,7 +201,7 @@ def _html_table(pairs):
             if k.startswith("I"):
                 inv, form = k.split(" ", 1)
                 v = getattr(p, inv).get(form)
-                e = relative_error(v) if v is not None and len(v) else None
+                e = relative_error(v, f"{inv}/{form}" in p.absolute) if v is not None and len(v) else None
             else:
                 e = p.errors.get(k)
             big = float(np.nanmax(e)) if e is not None and len(e) and np.isfinite(e).any() else None
@@ -258,7 +260,7 @@ def read_run(path) -> Run:
                     breakdown_time=_read(g, "breakdown_time", limit), points=sets("points"),
                     under_resolved_from={k.split("/")[1]: float(v) for k, v in g.attrs.items()
                                          if k.startswith("under_resolved_from/")},
-                    growth=_growth_attrs(g), points_used=sets("points_used"))
+                    growth=_growth_attrs(g), points_used=sets("points_used"), absolute=frozenset(absolute_invariants(f)))
             return Run(path=str(path), format=str(fmt), system=str(f.attrs.get("system", "")),
                        scene=str(f.attrs.get("scene", "")), steps=int(f.attrs.get("steps", 0)), pairs=pairs,
                        precision=str(f.attrs.get("precision", "double")))

@@ -426,7 +426,7 @@ def parse_scene(text: str, origin: str = "<scene>") -> Scene:
     data = _tables(text, origin)
     sysd, run = data["system"], data["run"]
     base = str(Path(origin).parent) if origin != "<scene>" else None
-    system, params, spec = _system_of(sysd, base)
+    system, params, spec = _system_of(sysd, base, _points_asked(data))
     loop, surface = _sets_of(data)
     maps, tabs, tableau_files, projs = _pairs_of(run, base)
     h, steps, every = _steps_of(run)
@@ -512,16 +512,29 @@ def _tables(text, origin) -> dict:
     return data
 
 
+def _points_asked(data) -> int:
+    """The sample points [loop] and [surface] ask for where they give whole numbers (at least
+    MIN_POINTS): a first measure of a scene's size, before the sets are checked."""
+    whole = lambda v: v if isinstance(v, int) and not isinstance(v, bool) and v > 0 else MIN_POINTS
+    loop, surface = data.get("loop", {}), data.get("surface", {})
+    count = whole(loop.get("points")) if isinstance(loop, dict) and loop else 0
+    if isinstance(surface, dict) and surface:
+        count += whole(surface.get("n_sigma")) * whole(surface.get("n_tau"))
+    return max(count, MIN_POINTS)
+
+
 def _finite(v) -> bool:
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
 
 
-def _system_of(sysd, base):
-    """[system]: (the System, its parameters, the user system's spec or {})."""
+def _system_of(sysd, base, points=MIN_POINTS):
+    """[system]: (the System, its parameters, the user system's spec or {}); ``points``: the sample
+    points the scene asks for, as far as its tables say before they are checked (a phase space of
+    step maps judges its memory by them before it is built)."""
     if "equilibrium" in sysd:
         return _equilibrium_of(sysd, base)
     if "degrees_of_freedom" in sysd or "dimension" in sysd or "one_form" in sysd:
-        return _phase_space_of(sysd, base)
+        return _phase_space_of(sysd, base, points)
     for k in ("period", "energy"):
         if k in sysd:
             raise SceneError(f"system.{k} belongs to a system given by step maps (system.degrees_of_freedom, or "
@@ -571,7 +584,7 @@ def _equilibrium_of(sysd, base):
     return _make_system(spec, params, base), params, spec
 
 
-def _phase_space_of(sysd, base):
+def _phase_space_of(sysd, base, points=MIN_POINTS):
     """[system] of black-box maps (integrators.service.phase_space): degrees_of_freedom = k, the
     canonical phase space (x, v) of dimension 2k, run.step_maps canonical maps step(x, v, h) -> (x, v);
     or dimension = d with one_form = "file.py:theta", run.step_maps maps step(q, h) -> q.  Both take
@@ -589,6 +602,10 @@ def _phase_space_of(sysd, base):
     k = sysd["degrees_of_freedom" if canonical else "dimension"]
     if k < (1 if canonical else 2):
         raise SceneError(f"{key} must be a positive number{'' if canonical else ' ≥ 2'}, got {k}")
+    if not canonical and k % 2:
+        raise SceneError(f"system.dimension = {k} is odd: a one-form on an odd number of coordinates is degenerate "
+                         "(dϑ has a kernel, no map can be symplectic for it); a degenerate Lagrangian needs an even d")
+    _check_dimension_memory(key, k, 2 * k if canonical else k, points)
     period = sysd.get("period")
     if period is not None:
         if isinstance(period, list):
@@ -726,10 +743,10 @@ def _make_system(spec, params, base):
     if "degrees_of_freedom" in spec or "one_form" in spec:
         from .phase_space import OneFormSpace, PhaseSpace
         energy = _load(spec["energy"], "system.energy", base) if "energy" in spec else None
-        try:
+        one_form = _load(spec["one_form"], "system.one_form", base) if "one_form" in spec else None
+        try:                              # (the loads above name their key already)
             if "one_form" in spec:
-                return OneFormSpace(spec["dimension"], _load(spec["one_form"], "system.one_form", base),
-                                    spec.get("name", "one-form"), spec.get("period"), energy)
+                return OneFormSpace(spec["dimension"], one_form, spec.get("name", "one-form"), spec.get("period"), energy)
             return PhaseSpace(spec["degrees_of_freedom"], spec.get("name", "canonical"), spec.get("period"), energy)
         except ValueError as exc:
             raise SceneError(f"system.{exc}") from None
@@ -844,7 +861,11 @@ def memory_per_point(d, s, precision="double", factors=True) -> tuple:
     only, which hold no Newton factors (O(d) a point)."""
     from ..engine import State
     nz = (s + 2) * d
-    state = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, d, s, precision).values())
+    def size(dd):
+        return sum(int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in State.schema(1, dd, s, precision).values())
+    # every field is linear in d: read off d = 1 and 2, never a state of the (perhaps huge) d itself
+    one, two = size(1), size(2)
+    state = one + (two - one) * (d - 1)
     factors = 8 * (nz * nz + nz) * (2 if precision == "double-double" else 1) if factors else 0
     return state + factors + 8 * 20 * d, state
 
@@ -872,6 +893,20 @@ def _local_ranks() -> int:
         except (KeyError, ValueError):
             pass
     return 1
+
+
+def _check_dimension_memory(key, value, d, points):
+    """Refuse, naming ``key``, a dimension d whose ``points`` sample points (the scene's sets, or the
+    fewest a set may have) cannot fit in this node's memory, before the system or any point is
+    built (a period of d entries, the points themselves); :func:`_check_memory` judges the whole
+    scene once it is built."""
+    free = available_memory()
+    per_point, state = memory_per_point(d, 1, "double", factors=False)
+    need = (8 * 16 * d + per_point + state) * points
+    if free is not None and need > free:
+        raise SceneError(f"{key} = {value:,} ({d:,} coordinates) needs about {need / 2**30:,.1f} GiB of memory for "
+                         f"{points:,} sample points; this node has {free / 2**30:,.1f} GiB available: a smaller "
+                         "system, or audit its map on a loop of fewer points (poincare audit --map)")
 
 
 def _check_memory(scene, system):
@@ -940,6 +975,7 @@ def _check_points(scene, system):
                              "shape radii or a size > 0")
         if getattr(system, "black_box", False):
             _check_energy(system, q, what)
+            _check_one_form(system, q, what)
             continue
         with np.errstate(all="ignore"):
             for key, values in (("H", system.H(q)), ("theta", system.theta(q)), ("H's gradient", system.dH(q))):
@@ -954,6 +990,25 @@ def _check_points(scene, system):
             k = int(np.flatnonzero(bad)[0])
             raise SceneError(f"{what}: Ω̄ = dϑ is singular at point {k} = {q[k].tolist()} (condition number "
                              f"{cond[k]:.1e}); check system.theta")
+
+
+def _check_one_form(system, q, what):
+    """A system of step maps with a one-form of code: system.one_form at a set's points, (n, d) finite
+    values, or a one-line error naming it (the maps' runs would all fail with no word of why)."""
+    if getattr(system, "one_form", None) is None:
+        return
+    try:
+        with np.errstate(all="ignore"):
+            t = system.theta(q)
+    except ValueError as exc:         # OneFormSpace.theta's own check names system.one_form
+        raise SceneError(f"{what}: {exc}") from None
+    except Exception as exc:          # the user's function may raise anything: one line naming it
+        raise SceneError(f"{what}: system.one_form failed: {type(exc).__name__}: {exc}") from None
+    bad = ~np.isfinite(t).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise SceneError(f"{what}: system.one_form is not finite at {int(bad.sum())} of {q.shape[0]} points (the first, "
+                         f"point {k} = {q[k].tolist()})")
 
 
 def _check_energy(system, q, what):

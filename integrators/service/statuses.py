@@ -9,19 +9,40 @@ from .files import DamagedFile, _read, plain_error
 from .checkpoints import settle_checkpoint
 from .output import FINISHED
 
-def relative_error(v) -> np.ndarray:
+def relative_error(v, absolute=False) -> np.ndarray:
     """|I(t) − I(0)| / |I(0)| of a series of invariant values; NaN throughout when I(0) is not a
-    finite non-zero number (the one definition of the invariant error: summaries, plots, audit)."""
+    finite non-zero number (the one definition of the invariant error: summaries, plots, audit).
+    ``absolute``: |I(t) − I(0)|, for an invariant whose I(0) is zero within its own error (an exact
+    zero, such as a closed one-form's I₁: a relative error has no scale there; see
+    :func:`absolute_invariants`)."""
     v = np.asarray(v, dtype=float)
+    if absolute:
+        with np.errstate(all="ignore"):
+            return np.abs(v - v[0]) if v.size and np.isfinite(v[0]) else np.full_like(v, np.nan)
     if v.size == 0 or not np.isfinite(v[0]) or v[0] == 0:
         return np.full_like(v, np.nan)
     with np.errstate(all="ignore"):
         return np.abs(v - v[0]) / abs(v[0])
 
 
+def absolute_invariants(f) -> set:
+    """{'I1/form', …}: the invariants of a run file whose I(0) is zero within its error (the root
+    attribute ``absolute_invariants``, written at the start of a run): their error is |I(t) − I(0)|."""
+    text = f.attrs.get("absolute_invariants", "")
+    return set((text.decode() if isinstance(text, bytes) else str(text)).split())
+
+
+def invariant_error(g, inv, form, values=None) -> np.ndarray:
+    """The error series of one invariant of a pair group: relative, or absolute where the file says
+    I(0) is zero (:func:`absolute_invariants`)."""
+    v = _read(g, f"{inv}/{form}") if values is None else values
+    return relative_error(v, f"{inv}/{form}" in absolute_invariants(g.file))
+
+
 def pair_summary(g, n_outputs, threshold):
     """(status, breakdowns, {'I1 form': max error over the resolved outputs}, unresolved) of one pair
-    group, unresolved = {set: (first under-resolved t, under-resolved outputs, outputs)}; reading a
+    group, unresolved = {set: (first under-resolved t, under-resolved outputs, outputs, the reason
+    the run recorded or "")}; reading a
     damaged dataset raises DamagedFile naming it."""
     try:
         bt = g["breakdown_time"][...]
@@ -34,12 +55,13 @@ def pair_summary(g, n_outputs, threshold):
             res = g[f"resolution/{inv}"][...]
             ok = (res <= threshold)           # NaN (a set with a broken point) is not resolved either
             if not broke and (~ok).any():
-                unresolved_from[inv] = (float(t[np.flatnonzero(~ok)[0]]), int((~ok).sum()), int(ok.size))
+                unresolved_from[inv] = (float(t[np.flatnonzero(~ok)[0]]), int((~ok).sum()), int(ok.size),
+                                        str(g.attrs.get(f"under_resolved_reason/{inv}", "")))
             for form in g[inv]:
                 v = g[inv][form][...]
                 use = ok & np.isfinite(v)       # resolved, and not yet broken down (NaN from a breakdown on)
                 use[:1] = False                 # the error at t = 0 is 0 by definition: it vouches for nothing
-                e = relative_error(v)
+                e = invariant_error(g, inv, form, v)
                 errs[f"{inv} {form}"] = float(np.max(e[use])) if use.any() and np.isfinite(e[use]).all() else np.nan
     except OSError as exc:
         raise DamagedFile(f"dataset in '{g.name}' is damaged ({plain_error(exc)})") from None
@@ -69,7 +91,7 @@ def growth_laws(g, threshold):
             continue
         ok = _read(g, f"resolution/{inv}") <= threshold
         for form in g[inv]:
-            e = relative_error(_read(g, f"{inv}/{form}"))
+            e = invariant_error(g, inv, form)
             laws[f"{inv} {form}"] = growth_law(t, np.where(ok, e, np.nan))
     for key in g:
         if key.endswith("_error"):

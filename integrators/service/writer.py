@@ -55,8 +55,11 @@ class Writer:
         rows = []
         for i, x in enumerate(b.held):
             parts = [r[i] for r in batches]
-            rows.append(pair.diagnostics.combine(x.step * scene.h, [p.errors for p in parts],
-                                                 {k: v for p in parts for k, v in p.values.items()}))
+            values = {k: v for p in parts for k, v in p.values.items()}
+            rows.append(pair.diagnostics.combine(x.step * scene.h, [p.errors for p in parts], values))
+            for key, why in values.items():       # the first reason a set was under-resolved, kept
+                if key[1] == "reason" and f"under_resolved_reason/{key[0]}" not in pair.g.attrs:
+                    pair.g.attrs[f"under_resolved_reason/{key[0]}"] = why
             if scene.store_points:
                 q = np.concatenate([p.state["q"] for p in parts])
                 for spec, sl in scene.sample_sets:
