@@ -249,7 +249,7 @@ def cmd_run(args) -> int:
                   "results differ from the default's in their last bits", flush=True)
         from .engine import kernel_cached
         if not kernel_cached():
-            print("compiling the step engine (once per machine: 1-2 minutes on 2 cores, before the first pair; "
+            print("compiling the step engine (once per machine: 1-4 minutes on 2 cores, before the first pair; "
                   "the pairs' wall times below do not include it) ...", flush=True)
             from .service.driver import compile_first
             try:                        # only a head start: whatever fails here, the preflight reports
