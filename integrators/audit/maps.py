@@ -390,15 +390,9 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
     if theta is not None and surface is not None and n > 2 * DENSE_UP_TO:
         raise ValueError(f"a surface of a noncanonical map takes Ω = Dϑᵀ − Dϑ, {n} × {n} a point: up to "
                          f"d = {2 * DENSE_UP_TO}; audit the loop (surface=None)")
-    D = _plane(n, plane, directions, canonical=theta is None)
-    _check_area(D, z0, k, theta, method)
-    loop = _loop(z0, D, float(radius), loop_points)
-    sets = {"I1": loop}
-    if surface is not None:
-        sets["I2"] = _surface(z0, D, float(radius), *surface).reshape(-1, n)
-    if P is not None:
-        _check_period(loop, P if theta is not None else np.concatenate([P, np.zeros(k)]))
-    shapes = {"I1": loop.shape, "I2": None if surface is None else (int(surface[0]), int(surface[1]), n)}
+    sets, shapes = _sets(z0, k, _plane(n, plane, directions, canonical=theta is None), radius, loop_points, surface,
+                         P, theta, method)
+    loop = sets["I1"]
     form = "canonical" if theta is None else "noncanonical"
     hs = [h * 2.0 ** -l for l in range(levels)]
     sel = np.linspace(0, loop.shape[0], defect_points, endpoint=False).astype(int)
@@ -422,6 +416,20 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
                 None if progress is None else (lambda hk, nm=nm: progress(f"{nm}: one-step defect at h = {hk:g}")), theta)
         report["candidates"].append(entry)
     return report
+
+
+def _sets(z0, k, D, radius, loop_points, surface, P, theta, method):
+    """({"I1": loop rows, "I2": surface rows}, their shapes) in the plane of D, checked: the plane
+    carries area of the form, the periods are ones the loop's steps can tell from a wrap."""
+    n = z0.size
+    _check_area(D, z0, k, theta, method)
+    loop = _loop(z0, D, float(radius), loop_points)
+    sets = {"I1": loop}
+    if surface is not None:
+        sets["I2"] = _surface(z0, D, float(radius), *surface).reshape(-1, n)
+    if P is not None:
+        _check_period(loop, P if theta is not None else np.concatenate([P, np.zeros(k)]))
+    return sets, {"I1": loop.shape, "I2": None if surface is None else (surface[0], surface[1], n)}
 
 
 def _check_area(D, z0, k, theta, method):

@@ -196,15 +196,12 @@ class Diagnostics:
                              h=self.scene.h, period=_period(self.system))
                     got = {f: got[_computed(self.system, f)] for f in forms}
                     out = {(spec.invariant, f): (got[f].value, got[f].resolution, True, True) for f in forms}
-                    return _with_reason(out, spec.invariant, [got[f] for f in forms])
+                    return _with_reason(out, spec.invariant, [got[f].reason for f in forms])
                 except ValueError:      # a non-finite field: each form on its own says which fail
                     pass
         got = {form: self.invariant(spec, form, q, p, lam, live) for form in forms}
         out = {(spec.invariant, form): v[:3] + (bool(live.all()),) for form, v in got.items()}
-        why = next((v[3] for v in got.values() if v[3]), "")
-        if why:
-            out[(spec.invariant, "reason")] = why
-        return out
+        return _with_reason(out, spec.invariant, [v[3] for v in got.values()])
 
     def row(self, t, q, p, lam, live) -> dict:
         """The whole row of points (n, d) on one process."""
@@ -216,11 +213,11 @@ class Diagnostics:
         return self.combine(t, [self.point_errors(q, p, live)], values)
 
 
-def _with_reason(values, inv, got):
+def _with_reason(values, inv, reasons):
     """``values`` with (inv, "reason"): why the set was under-resolved where its spectrum cannot say
     (InvariantValue.reason: a wrapped coordinate without its period, a period the samples cannot
-    tell from a step), when a form gives one; rank 0 keeps the first as the pair's attribute."""
-    why = next((v.reason for v in got if v.reason), "")
+    tell from a step), when a form's ``reasons`` give one; rank 0 keeps the first as the pair's attribute."""
+    why = next((r for r in reasons if r), "")
     if why:
         values[(inv, "reason")] = why
     return values
