@@ -28,6 +28,7 @@ corrected    ϑ_λ = (ϑ_i − hλ^kϑ_{k,i})(dq^i − h dλ^i)  dϑ_λ on (q, �
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 from numba import njit
@@ -43,24 +44,36 @@ UNDER_RESOLVED = 1e-10   # documented threshold of the resolution monitor
 
 @dataclasses.dataclass(frozen=True)
 class InvariantValue:
-    """An invariant with its resolution monitor.
+    """An invariant with its resolution monitor (docs/invariants.md, "The resolution monitor bounds
+    the value").
 
-    value : float
+    value : float; for a form computed on the set (noncanonical, corrected, a callable), the sum on
+        the set interpolated to ``padding`` times its points (loops: trigonometric interpolation;
+        surfaces: Chebyshev, about ``padding`` times the points a side), the finest where the sum
+        converged; the canonical form of a loop is summed on its samples (Parseval is exact there)
     resolution : the larger of two relative readings, each 0 for a set resolved to round-off:
-        the value's own error estimate over |value| (``error``/|value|), and the relative size of
-        the highest modes of the sampled set, as before (of q; of q and p, canonical; of (q, hλ)
-        together, corrected: hλ enters ϑ_λ as a displacement of q)
+        ``error``/|value| less round-off, and the relative size of the highest modes of the sampled
+        set (of q; of q and p, canonical; of (q, hλ) together, corrected: hλ enters ϑ_λ as a
+        displacement of q)
     under_resolved : resolution > UNDER_RESOLVED (1e-10)
-    error : the estimate, erring large, of |value − exact| from the spectra of what the value is
-        made of (docs/invariants.md, "The resolution monitor"): on a loop the aliasing of the
-        one-form's coefficients against q's modes (spectral.loop_pairing_error), on a surface the
-        Clenshaw–Curtis error of the integrand (spectral.surface_quadrature_error); plus the
-        round-off below
+    error : a bound on |value − exact| where the sampled set is resolved and each doubling of the
+        points at least halves the sum's error: the value's change on the last doubling (or
+        move·ρ/(1 − ρ) where the moves fell by ρ ≤ ½; 0 where the form's and the set's samples are
+        at round-off already, and the N-point sum is exact), plus what the set's top eighth of modes
+        adds, measured, and the round-off below (:func:`_padded`).  Where the set is not resolved
+        (or its interpolant leaves the form's domain) it is not padded, and ``error`` is the model
+        of the form's aliasing, an estimate
     roundoff : the value's round-off relative to |value|: 8 ulps of the size of the terms summed,
-        which can be 10⁴ times the value where they cancel (a loop stretched by shear).  A floor of
+        which can be 10⁴ times the value where they cancel (a loop stretched by shear), and the
+        rounding of the points themselves (8 ulps of their largest coordinate) carried through the
+        derivative: on a loop as white noise paired with the form's modes, on a surface times n
+        over the set's extent (a 1 mm patch at R = 2.5 is rounded at 1e-10 of its size); and what a
+        floor of the set's top modes (at round-off, or flat: the orbits' noise) adds, measured.  A floor of
         the value's precision that more points do not lower, so not part of ``resolution``
     reason : why a set is under-resolved where its spectrum cannot say (a coordinate that jumps by
-        more than half its extent between neighbours: a wrapped angle given no ``period``); "" else
+        more than half its extent between neighbours: a wrapped angle given no ``period``; padded
+        values that do not converge); "" else
+    padding : the factor of the points the value was summed on (1: the samples themselves)
     """
 
     value: float
@@ -69,18 +82,22 @@ class InvariantValue:
     error: float = 0.0
     roundoff: float = 0.0
     reason: str = ""
+    padding: int = 1
 
     def __float__(self):
         return self.value
 
 
-def _value(value, error, roundoff, tail, reason=""):
+def _value(value, error, roundoff, tail, reason="", padding=1):
     """The InvariantValue of a value with its error estimate, its round-off and its set's relative tail
     (a ``reason`` makes it under-resolved whatever the spectra say: resolution 1)."""
     value = float(value)
-    res = max(spectral.relative(error, value), tail, 1.0 if reason else 0.0)
+    # an error within twice the round-off is round-off's (reported as ``roundoff``), not the set's: a
+    # padded value that moved by its last bits, a value that is zero within round-off (a closed form)
+    reading = spectral.relative(error, value) if error > 2.0 * roundoff else 0.0
+    res = max(reading, tail, 1.0 if reason else 0.0)
     return InvariantValue(value, float(res), bool(res > UNDER_RESOLVED), float(error + roundoff),
-                          float(spectral.relative(roundoff, value)), reason)
+                          float(spectral.relative(roundoff, value)), reason, int(padding))
 
 
 def _periods(period, d):
@@ -166,7 +183,6 @@ def _check_periodic(A_of, q, P, what):
 
 
 MIN_POINTS = 8           # the fewest points along a direction of a sample set
-SUBSET_BELOW = 1e-3 * UNDER_RESOLVED    # a loop's spectral estimate below this (relative) needs no subset
 
 
 def _check(q, ndim, what):
@@ -255,17 +271,157 @@ def _winding(q, P):
     return qu - tau[:, None] * ramp, ramp
 
 
+PADDING_MAX = 8         # a loop's one-form is evaluated on at most 8N interpolated points, a surface's
+                        # two-form on at most (4n − 3)² (two doublings of its Chebyshev grid)
+CONVERGED = 1e-3 * UNDER_RESOLVED   # a padded value that moves by less than this (relative) has converged
+
+
+def _converged(move, value, roundoff):
+    """Whether a padded value that moved by ``move`` on doubling the points needs no more: below
+    CONVERGED of the value, or within twice its round-off."""
+    return move <= max(CONVERGED * abs(value), 2.0 * roundoff)
+
+
+def _points_precision(q, n):
+    """The relative round-off a surface's own points carry into its derivatives: 8 ulps of their
+    largest coordinate over the set's largest extent, times n (the points a direction; the
+    derivative's amplification of noise).  A small set far from the origin (a 1 mm patch at R = 2.5)
+    has its points rounded at 1e-10 of its size here, which no number of interpolated points changes."""
+    axes = tuple(range(q.ndim - 1))
+    extent = float(np.max(np.max(q, axis=axes) - np.min(q, axis=axes)))
+    return 8.0 * EPS * float(np.max(np.abs(q))) / extent * n if extent > 0 else 0.0
+
+
+def _padded(value_at, first, roundoff, cap):
+    """The value of a sum on ever finer interpolated samples (the monitor's bound, docs/invariants.md,
+    "The resolution monitor bounds the value"): ``first`` on the samples given, then
+    ``value_at(level)`` on ``level`` times the points (level 2, 4, …; None where the interpolant left
+    the form's domain) until the value moves by less than CONVERGED or the level reaches ``cap``.
+
+    Returns (value, error, level, reason).  ``error`` is the last move, which bounds the last value's
+    error where each doubling of the points at least halves it; from the third level on, where the
+    moves fell by a ratio ρ ≤ ½, it is move·ρ/(1 − ρ), the bound where each doubling reduces the error
+    by ρ or more (the assumption, checked by the moves themselves).  Where the moves do not halve (a
+    set whose spectrum ends in a floor, the points' own noise), ``error`` is twice the largest move,
+    an estimate rather than a bound, and above UNDER_RESOLVED of the value it comes with a reason.
+    (first, None, 1, reason) where the interpolant left the domain."""
+    previous, level, moves = first, 1, []
+    while True:
+        level *= 2
+        value = value_at(level)
+        if value is None:
+            return first, None, 1, ("the set interpolated between its samples leaves the form's domain (values "
+                                    f"not finite on {level}× its points)")
+        moves.append(abs(value - previous))
+        previous = value
+        if _converged(moves[-1], value, roundoff) or level >= cap:
+            break
+    error, reason = moves[-1], ""
+    if len(moves) > 1 and 0.0 < moves[-2] and moves[-1] <= 0.5 * moves[-2]:
+        # the error falls by ρ = the last move's ratio to the one before, or faster (an aliasing error
+        # falls exponentially, or algebraically with a constant ratio): |e_s| ≤ move · ρ/(1 − ρ)
+        rho = moves[-1] / moves[-2]
+        error = moves[-1] * rho / (1.0 - rho)
+    elif not _converged(error, value, roundoff) and len(moves) > 1:
+        error = 2.0 * max(moves)
+        if error > UNDER_RESOLVED * abs(value):
+            reason = (f"the value on the set interpolated to {level}× its points does not converge: it moved by "
+                      f"{', then '.join(f'{m:.3g}' for m in moves)}")
+    return value, error, level, reason
+
+
+class _LoopLevels:
+    """The loop interpolated between its samples (spectral.loop_shifted), shared by the forms of one
+    call: the samples at τ_j = (j + phase)/N of q (its periodic part r and the winding's ramp) and λ."""
+
+    def __init__(self, qh, lh, ramp, N):
+        self.qh, self.lh, self.ramp, self.N = qh, lh, ramp, N
+        self._points = {}
+        self._truncated = None
+
+    def points(self, phase):
+        """(q, r, r's coefficients, λ, λ's coefficients) at τ_j = (j + phase)/N."""
+        if phase not in self._points:
+            r, rh = spectral.loop_shifted(self.qh, self.N, phase)
+            q = r if self.ramp is None else r + ((np.arange(self.N) + phase) / self.N)[:, None] * self.ramp
+            lam, lh = spectral.loop_shifted(self.lh, self.N, phase) if self.lh is not None else (None, None)
+            self._points[phase] = (q, r, rh, lam, lh)
+        return self._points[phase]
+
+    def truncated(self):
+        """The same loop without its top eighth of modes (of q and λ)."""
+        if self._truncated is None:
+            top = spectral.top_mode(self.qh.shape[0] - 1)
+            cut = lambda c: None if c is None else np.concatenate([c[:top], np.zeros_like(c[top:])])
+            self._truncated = _LoopLevels(cut(self.qh), cut(self.lh), self.ramp, self.N)
+        return self._truncated
+
+
+def _loop_sum(coefficients, levels, phase, ramp):
+    """The N-point sum of a form's I₁ on the loop's samples shifted by ``phase`` of a grid step; None
+    where the form is not finite there."""
+    q, r, rh, lam, lh = levels.points(phase)
+    got = coefficients(q, lam)
+    if got is None:
+        return None
+    A, Al = got
+    v = spectral.loop_pairing(A, r, bh=rh)
+    if Al is not None:
+        v += spectral.loop_pairing(Al, lam, bh=lh)
+    if ramp is not None and ramp.any():
+        v += np.sum(ramp * np.mean(A, axis=0))
+    return float(v)
+
+
+def _loop_value(coefficients, levels, value, roundoff, ramp):
+    """(value, error, level, reason) of one form on the padded loop (:func:`_padded`).  On s·N points
+    the sum is the mean of the N-point sums at the s phases j/s of a grid step (the trapezoidal rule
+    on the finer grid, split by phase): each doubling adds the odd phases.  ``coefficients``:
+    (q, λ) → (A, Aλ) at shifted points, or None where not finite."""
+    terms = [float(value)]
+
+    def value_at(level):
+        new = [_loop_sum(coefficients, levels, j / level, ramp) for j in range(1, level, 2)]
+        if any(v is None for v in new):
+            return None
+        terms.extend(new)
+        return math.fsum(terms) / level          # summed exactly: the order of the phases cannot matter
+    return _padded(value_at, float(value), roundoff, PADDING_MAX)
+
+
+def _truncation_effect(coefficients, levels, level, value, ramp):
+    """|value − the same sum on the loop without its top eighth of modes|: what the modes at the edge
+    of the samples' resolution add to the value, measured (the modes beyond N/2, smaller where the
+    spectrum decays, add less).  None where the truncated loop leaves the form's domain."""
+    cut = levels.truncated()
+    terms = [_loop_sum(coefficients, cut, j / level, ramp) for j in range(level)]
+    if any(v is None for v in terms):
+        return None
+    return abs(value - math.fsum(terms) / level)
+
+
 def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=None) -> dict:
-    """{form: I₁} for several forms of one loop, sharing q's Fourier coefficients and resolution
-    monitor; each value is bitwise what it is alone.  ``period``: as :func:`first_invariant`."""
+    """{form: I₁} for several forms of one loop, sharing q's Fourier coefficients, its interpolated
+    points and its resolution monitor; each value is bitwise what it is alone.  ``period``: as
+    :func:`first_invariant`.
+
+    A form computed on the loop (noncanonical, corrected, a callable) is summed on the loop
+    interpolated to 2N, 4N, … points until the value converges (:func:`_padded`): the value is the
+    sum on the finest, its error the last change, plus what the set's top eighth of modes adds to it
+    where that is above round-off (:func:`_truncation_effect`).  The canonical form pairs two sets
+    of samples, p and q: the N-point sum is exact for their interpolants (Parseval), so its error is
+    what their top eighth adds, bounded term by term, and the model of their modes beyond
+    (spectral.loop_pairing_error).  A set whose spectrum does not fall towards its top
+    (spectral.decaying) is read by its top modes, as before."""
     q = _check(q, 2, "loop q")
+    N = q.shape[0]
     P = _periods(period, q.shape[1])
     r, ramp = (q, None) if P is None else _winding(q, P)
     qh = spectral.fourier_coefficients(r)
     aq = np.abs(qh)                    # shared by the monitor's readings
+    top = spectral.top_mode(aq.shape[0] - 1)
     reason = None
-    half = q.shape[0] % 2 == 0 and q.shape[0] // 2 >= MIN_POINTS    # the every-other-point subset
-    qh2 = None
+    levels = None
     out = {}
     for form in forms:
         A, Al = one_form_coefficients(q, form, system, p, lam, h)
@@ -274,40 +430,99 @@ def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=Non
         ah = spectral.fourier_coefficients(A)
         aa = np.abs(ah)
         value = spectral.loop_pairing(A, r, bh=qh, ah=ah)        # in Fourier space (Parseval)
-        error, roundoff, tail_a, tail_q = spectral.loop_pairing_error(ah, qh, q.shape[0], absolute=(aa, aq), tails=True)
+        padded = form != "canonical"
+        error, roundoff, tail_a, tail_q = spectral.loop_pairing_error(ah, qh, N, absolute=(aa, aq), tails=True,
+                                                                      model=(not padded, True))
         if reason is None:
             # a jump of a wrapped coordinate is a discontinuity, whose spectrum already flags the set:
             # the reason is sought only then (a third of the call's time at D = 2 otherwise); a
             # period the samples cannot tell from a step flags the set whatever its spectrum
-            reason = (_period_steps([np.diff(r, axis=0, append=r[:1]) + ramp / q.shape[0]], P)
+            reason = (_period_steps([np.diff(r, axis=0, append=r[:1]) + ramp / N], P)
                       if P is not None else "")
             reason = reason or (_jumps(r, P, (0,), closed=True) if tail_q > UNDER_RESOLVED else "")
         if ramp is not None and ramp.any():                    # the winding: ∮ A_i m P_i dτ, A's mean
             wind = np.abs(ramp) * np.max(np.abs(A), axis=0)
             value += np.sum(ramp * np.mean(A, axis=0))
-            error += tail_a * np.sum(wind)
+            error += (0.0 if padded else tail_a) * np.sum(wind)
             roundoff += 8 * EPS * np.sum(wind)
-        check = half and error > SUBSET_BELOW * abs(float(value))     # the subset's value, where it can matter
-        if check:
-            qh2 = spectral.fourier_coefficients(r[::2]) if qh2 is None else qh2
-            value2 = spectral.loop_pairing(A[::2], r[::2], bh=qh2)
-            if ramp is not None and ramp.any():
-                value2 += np.sum(ramp * np.mean(A[::2], axis=0))
-        res = tail_q
+        # the points' own rounding (8 ulps of each coordinate's largest value, white noise of 1/√N a
+        # mode) paired with the form's modes of that coordinate: 4π Σ_i ε_i Σ_k k|â_ik| / √N
+        roundoff += 4.0 * np.pi * 8.0 * EPS / np.sqrt(N) * float(
+            np.sum(np.max(np.abs(r), axis=0) * (spectral._modes(aa.shape[0] - 1, aa.ndim) * aa[1:])))
+        tail, spectra = tail_q, [aq]
         if Al is not None:
             alh, lh = spectral.fourier_coefficients(Al), spectral.fourier_coefficients(lam)
             value += spectral.loop_pairing(Al, lam, bh=lh, ah=alh)
-            e2, r2 = spectral.loop_pairing_error(alh, lh, q.shape[0])
+            e2, r2 = spectral.loop_pairing_error(alh, lh, N, model=(False, True))
             error, roundoff = error + e2, roundoff + r2
-            if check:
-                value2 += spectral.loop_pairing(Al[::2], lam[::2])
-            res = spectral.loop_tail(np.concatenate([r, h * lam], axis=-1))   # hλ has the units of q
-        if check:             # two estimates that err large: the smaller is the sharper, and still errs large
-            error = min(error, abs(float(value) - float(value2)))
+            scaled = np.abs(h * lh)
+            tail = spectral.loop_tail(None, absolute=np.concatenate([aq, scaled], axis=-1))   # hλ: units of q
+            spectra.append(scaled)
         if form == "canonical":
-            res = max(res, tail_a)
-        out[form] = _value(value, error, roundoff, res, reason)
+            tail, spectra = max(tail, tail_a), spectra + [aa]
+            # what the top eighth adds to the sum, term by term: 4π Σ_{k ≥ top} k |p̂_k||q̂_k|
+            error += 4.0 * np.pi * float(np.sum(np.arange(top, aa.shape[0])[:, None] * aa[top:] * aq[top:]))
+        decays = all(spectral.decaying(c) for c in spectra)
+        why, level, move = reason, 1, None
+        if padded and spectral.top_at_roundoff(aa) and (Al is None or spectral.top_at_roundoff(np.abs(alh))) \
+                and spectral.top_at_roundoff(aq):
+            move = 0.0          # the form's and the set's samples resolved to round-off: the sum is exact
+        elif padded and (decays or tail <= UNDER_RESOLVED) and not reason:
+            # the set is resolved, or falls towards its top: its interpolant is the loop, and the sum
+            # on it converges
+            if levels is None:
+                levels = _LoopLevels(qh, spectral.fourier_coefficients(lam) if lam is not None else None, ramp, N)
+            floor = not any(spectral.falling(c) and not spectral.top_at_roundoff(c) for c in spectra)
+            value, move, level, why, rounding = _padded_loop_form(_shifted_form(form, system, p, h), levels, value,
+                                                                  roundoff, ramp, tail, floor)
+            roundoff += rounding
+        if padded and move is None:        # not padded: the samples' sum, the one-form's aliasing modelled
+            error = error + _aliasing_model(ah, qh, aa, aq, N, Al, lam)
+        out[form] = _value(value, error + (move or 0.0), roundoff, 0.0 if decays else tail, why, level)
     return out
+
+
+def _padded_loop_form(coefficients, levels, value, roundoff, ramp, tail, floor):
+    """(value, error, level, reason, rounding) of a form on the padded loop (:func:`_loop_value`),
+    with what the set's top eighth adds where that could reach CONVERGED of the value (``tail``: the
+    set's relative top modes; the sum's terms are roundoff / 8 ulps): in the error where the top is
+    a falling spectrum above round-off, or in ``rounding`` where it is a ``floor`` (at round-off, or
+    flat: the points' own rounding and noise, which more points do not lower); error None where the
+    interpolant left the form's domain."""
+    value, move, level, why = _loop_value(coefficients, levels, value, roundoff, ramp)
+    rounding = 0.0
+    if move is not None and tail * roundoff / (8 * EPS) > CONVERGED * abs(value):
+        cut = _truncation_effect(coefficients, levels, level, value, ramp)
+        if cut is None:
+            move, why = move + tail * abs(value), why or "the set without its top modes leaves the form's domain"
+        elif floor:
+            rounding = cut
+        else:
+            move += cut
+    return value, move, level, why, rounding
+
+
+def _aliasing_model(ah, qh, aa, aq, N, Al, lam):
+    """The model of the one-form's aliasing (its modes beyond N/2 from its top eighth): the estimate
+    where padding cannot measure it (a set not resolved, or interpolated out of the domain)."""
+    e = spectral.loop_pairing_error(ah, qh, N, absolute=(aa, aq), model=(True, False))[0]
+    if Al is not None:
+        e += spectral.loop_pairing_error(spectral.fourier_coefficients(Al), spectral.fourier_coefficients(lam), N,
+                                         model=(True, False))[0]
+    return e
+
+
+def _shifted_form(form, system, p, h):
+    """(q, λ) → (A, Aλ) of ``form`` at interpolated points, or None where a value is not finite."""
+    def coefficients(q, lam):
+        try:
+            A, Al = one_form_coefficients(q, form, system, p, lam, h)
+        except ValueError:                  # a user one-form that failed or was not finite there
+            return None
+        if not np.all(np.isfinite(A)) or (Al is not None and not np.all(np.isfinite(Al))):
+            return None
+        return A, Al
+    return coefficients
 
 
 def corrected_omega(system, q, lam, h, paper_sign=False):
@@ -393,14 +608,19 @@ def second_invariant(q, form="noncanonical", system=None, p=None, lam=None, h=No
 
 def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sign=False, period=None) -> dict:
     """{form: I₂} for several forms of one surface, sharing what they share: the transforms and
-    derivatives of q, and ϑ_q, ϑ_qq from one compiled pass over the points for noncanonical and
-    corrected together.  Each form's value is bitwise what it is alone (tests/test_invariants.py)."""
+    derivatives of q, its interpolated grids, and ϑ_q, ϑ_qq from one compiled pass over the points for
+    noncanonical and corrected together.  Each form's value is bitwise what it is alone
+    (tests/test_invariants.py).
+
+    Each form is integrated on the surface interpolated (Chebyshev) to about 2, 4 times the points a
+    side (2n − 1, 4n − 3: grids that hold the given one) until the value converges (:func:`_padded`):
+    the integrand is a product of the derivatives and Ω, of about twice q's degree, which
+    Clenshaw–Curtis on the n points given does not integrate exactly."""
     q = _check(q, 3, "surface q")
     d = q.shape[-1]
     for form in forms:
         if not callable(form) and form not in FORMS:
             raise ValueError(f"unknown form '{form}'; choose one of {', '.join(FORMS)}")
-    named = [f for f in forms if not callable(f)]
     P = _periods(period, d)
     qu = q if P is None else _unwrap(_unwrap(q, P, 1), P, 0)    # along τ, then σ: the patch in one sheet
     if P is not None:
@@ -409,51 +629,133 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
                 _check_periodic(lambda x: _user_values(form, x, x.shape + (d,), "two-form"), q, P, "two-form")
             elif form != "canonical":
                 _check_periodic(_need(system, "system", form).Omega, q, P, "two-form Ω̄ of the system")
-    cq0 = spectral.chebyshev_coefficients(qu, 0)
-    qs, qt = spectral.chebyshev_derivative(qu, 0, cq0), spectral.chebyshev_derivative(qu, 1)
-    cq2 = np.abs(spectral.chebyshev_coefficients(cq0, 1))
-    tail_q = spectral.coefficient_tail(cq2)
+    named = [f for f in forms if not callable(f)]
+    if "noncanonical" in named or "corrected" in named:
+        _need(system, "system", "noncanonical" if "noncanonical" in named else "corrected")
+    if "corrected" in named:
+        lam = _check(_need(lam, "lam", "corrected"), 3, "lam")
+        h = float(_need(h, "h", "corrected"))
+    if "canonical" in named:
+        p = _check(_need(p, "p", "canonical"), 3, "p")
+    grid = _SurfaceGrid(q, qu, p if "canonical" in named else None, lam if "corrected" in named else None)
+    tail_q = spectral.coefficient_tail(grid.cq2)
     reason = _period_steps([np.diff(qu, axis=0), np.diff(qu, axis=1)], P) if P is not None else ""   # (as for loops)
     reason = reason or (_jumps(qu, P, (0, 1), closed=False) if tail_q > UNDER_RESOLVED else "")
-    out, omega = {}, {}
-    if "noncanonical" in named or "corrected" in named:
-        sy = _need(system, "system", "noncanonical" if "noncanonical" in named else "corrected")
-        want = "corrected" in named
-        if want:
-            lam = _check(_need(lam, "lam", "corrected"), 3, "lam")
-            h = float(_need(h, "h", "corrected"))
-            cl0 = spectral.chebyshev_coefficients(lam, 0)
-            ls, lt = spectral.chebyshev_derivative(lam, 0, cl0), spectral.chebyshev_derivative(lam, 1)
-        else:
-            ls = lt = cl0 = None
-        got = _compiled_integrands(sy, q, lam, qs, qt, ls, lt, h, paper_sign, want)
-        if got is None:                     # a duck-typed system: the numpy route
-            Om = sy.Omega(q)
-            got = (np.einsum("...i,...ij,...j->...", qs, Om, qt),
-                   np.einsum("...i,...ij,...j->...", np.concatenate([qs, ls], axis=-1),
-                             corrected_omega(sy, q, lam, h, paper_sign), np.concatenate([qt, lt], axis=-1))
-                   if want else None)
-        omega = {"noncanonical": got[0], "corrected": got[1]}
+    integrands = grid.integrands(forms, system, h, paper_sign)
+    out = {}
     for form in forms:
-        res = tail_q
-        if callable(form):
-            Om = _user_values(form, q, q.shape + (d,), "two-form")
-            integrand = np.einsum("...i,...ij,...j->...", qs, Om, qt)
-        elif form == "canonical":
-            p = _check(_need(p, "p", form), 3, "p")
-            cp0 = spectral.chebyshev_coefficients(p, 0)
-            ps, pt = spectral.chebyshev_derivative(p, 0, cp0), spectral.chebyshev_derivative(p, 1)
-            integrand = np.sum(ps * qt - pt * qs, axis=-1)
-            res = max(tail_q, spectral.surface_tail(p, cp0))
-        elif form == "noncanonical":
-            integrand = omega["noncanonical"]
-        else:
-            integrand = omega["corrected"]
-            hl2 = np.abs(h * spectral.chebyshev_coefficients(cl0, 1))      # λ's coefficients, scaled
-            res = spectral.coefficient_tail(np.concatenate([cq2, hl2], axis=-1))   # hλ has the units of q
-        out[form] = _value(spectral.surface_integral(integrand), spectral.surface_quadrature_error(integrand),
-                           spectral.surface_roundoff(integrand), res, reason)
+        res, spectra = tail_q, [grid.cq2]
+        if form == "canonical":
+            cp2 = np.abs(spectral.chebyshev_coefficients(grid.cp0, 1))
+            res, spectra = max(tail_q, spectral.coefficient_tail(cp2)), spectra + [cp2]
+        elif form == "corrected":
+            hl2 = np.abs(h * spectral.chebyshev_coefficients(grid.cl0, 1))      # λ's coefficients, scaled
+            res = spectral.coefficient_tail(np.concatenate([grid.cq2, hl2], axis=-1))   # hλ has the units of q
+            spectra.append(hl2)
+        decays = all(spectral.decaying(c, axis) for c in spectra for axis in (0, 1))
+        integrand = integrands[form]
+        value, roundoff = spectral.surface_integral(integrand), spectral.surface_roundoff(integrand)
+        roundoff *= 1.0 + _points_precision(qu, max(q.shape[:2])) / (8 * EPS)     # the points' own rounding
+        why, level, error = reason, 1, None
+        coefficients = np.abs(spectral.chebyshev_coefficients(spectral.chebyshev_coefficients(integrand, 0), 1))
+        if spectral.top_at_roundoff(coefficients, (0, 1)) and spectral.top_at_roundoff(grid.cq2, (0, 1)):
+            error = 0.0         # the integrand resolved to round-off on the points given: Clenshaw–Curtis is exact
+        elif (decays or res <= UNDER_RESOLVED) and not reason:     # the interpolant is the surface
+
+            def value_at(level, form=form, grid=grid):
+                # every form's integrand on the level's grid in one pass (each form's numbers as alone)
+                got = grid.refined(level).integrands(forms, system, h, paper_sign)[form]
+                return spectral.surface_integral(got) if np.all(np.isfinite(got)) else None
+            value, error, level, why = _padded(value_at, float(value), roundoff, PADDING_MAX // 2)
+            if error is not None and res * roundoff / (8 * EPS) > CONVERGED * abs(value):   # (as for loops)
+                cut = value_at(level, grid=grid.truncated()) if level > 1 else None
+                if cut is None:
+                    error += res * abs(value)
+                    why = why or "the set without its top modes leaves the form's domain"
+                elif not any(spectral.falling(c, axis) and not spectral.top_at_roundoff(c, (axis,))
+                             for c in spectra for axis in (0, 1)):   # a floor: the points' own (as for loops)
+                    roundoff += abs(value - cut)
+                else:
+                    error += abs(value - cut)
+        if error is None:              # not padded: the model of the integrand's Clenshaw–Curtis error
+            error = spectral.surface_quadrature_error(integrand)
+        out[form] = _value(value, error, roundoff, 0.0 if decays else res, why, level)
     return out
+
+
+class _SurfaceGrid:
+    """A surface's values on its Chebyshev grid with their derivatives (what the forms share), the
+    forms' integrands there (computed together, cached), and the same surface interpolated to the
+    finer grids of :func:`second_invariants` (cached by level: level s has s(n − 1) + 1 points a
+    side; the values and the derivatives are each refined from the given grid, where the
+    interpolant's derivative is exact)."""
+
+    def __init__(self, q, qu, p, lam, derivatives=None):
+        self.q, self.qu, self.p, self.lam = q, qu, p, lam
+        if derivatives is None:
+            cq0 = spectral.chebyshev_coefficients(qu, 0)
+            self.cq2 = np.abs(spectral.chebyshev_coefficients(cq0, 1))
+            self.cp0 = spectral.chebyshev_coefficients(p, 0) if p is not None else None
+            self.cl0 = spectral.chebyshev_coefficients(lam, 0) if lam is not None else None
+            d = lambda v, c0: (None, None) if v is None else (spectral.chebyshev_derivative(v, 0, c0),
+                                                              spectral.chebyshev_derivative(v, 1))
+            derivatives = d(qu, cq0) + d(p, self.cp0) + d(lam, self.cl0)
+        self.qs, self.qt, self.ps, self.pt, self.ls, self.lt = derivatives
+        self._levels, self._integrands = {}, {}
+
+    def truncated(self):
+        """The same surface without its top eighth of Chebyshev modes in either direction (of q, p, λ)."""
+        def cut(v):
+            if v is None:
+                return None
+            c = spectral.chebyshev_coefficients(spectral.chebyshev_coefficients(v, 0), 1)
+            ns, nt = c.shape[:2]
+            c[spectral.top_mode(ns - 1):] = 0.0
+            c[:, spectral.top_mode(nt - 1):] = 0.0
+            return spectral.chebyshev_values(spectral.chebyshev_values(c, 0), 1)
+        qu = cut(self.qu)
+        return _SurfaceGrid(qu, qu, cut(self.p), cut(self.lam))
+
+    def refined(self, level):
+        """The grid interpolated to level × (n − 1) + 1 points a side."""
+        if level not in self._levels:
+            shape = tuple(level * (n - 1) + 1 for n in self.q.shape[:2])
+            # what the integrands read (p's values are not read), refined in one transform of them all
+            parts = (self.qu, self.qs, self.qt, self.ps, self.pt, self.lam, self.ls, self.lt)
+            held = [v for v in parts if v is not None]
+            fine = np.split(spectral.chebyshev_refined(np.concatenate(held, axis=-1), shape), len(held), axis=-1)
+            it = iter(fine)
+            qu, qs, qt, ps, pt, lam, ls, lt = (None if v is None else next(it) for v in parts)
+            self._levels[level] = _SurfaceGrid(qu, qu, None, lam, (qs, qt, ps, pt, ls, lt))
+        return self._levels[level]
+
+    def integrands(self, forms, system, h, paper_sign):
+        """{form: the integrand of I₂ at the grid's points} (each form's numbers the same whichever
+        forms are asked with it; computed once a grid)."""
+        missing = [f for f in forms if f not in self._integrands]
+        named = [f for f in missing if not callable(f)]
+        q, qs, qt, d = self.q, self.qs, self.qt, self.q.shape[-1]
+        out = self._integrands
+        if "noncanonical" in named or "corrected" in named:
+            want = "corrected" in named
+            lam, ls, lt = (self.lam, self.ls, self.lt) if want else (None, None, None)
+            got = _compiled_integrands(system, q, lam, qs, qt, ls, lt, h, paper_sign, want)
+            if got is None:                     # a duck-typed system: the numpy route
+                Om = system.Omega(q)
+                got = (np.einsum("...i,...ij,...j->...", qs, Om, qt),
+                       np.einsum("...i,...ij,...j->...", np.concatenate([qs, ls], axis=-1),
+                                 corrected_omega(system, q, lam, h, paper_sign), np.concatenate([qt, lt], axis=-1))
+                       if want else None)
+            out["noncanonical"] = got[0]
+            if want:
+                out["corrected"] = got[1]
+        for form in missing:
+            if callable(form):
+                Om = _user_values(form, q, q.shape + (d,), "two-form")
+                out[form] = np.einsum("...i,...ij,...j->...", qs, Om, qt)
+            elif form == "canonical":
+                out[form] = np.sum(self.ps * qt - self.pt * qs, axis=-1)
+        return {f: out[f] for f in forms}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -71,6 +71,33 @@ def band_limited_loop(n, center, modes=20, decay=0.7, scale=None, seed=1):
     return q
 
 
+def band_limited_surface(n_sigma, n_tau, center, degree=6, decay=0.7, scale=None, seed=1):
+    """A surface whose coordinates are polynomials of ``degree`` in σ and in τ, exactly: (n_σ, n_τ, d).
+
+    q(σ, τ) = center + Σ_{j, l ≤ degree, (j, l) ≠ (0, 0)} c_jl T_j(2σ − 1) T_l(2τ − 1), c_jl normal
+    with standard deviations ``scale``·decay^(j + l) (``scale``: one number per coordinate, default
+    0.05 each) from numpy's generator of ``seed``.  Its own Chebyshev coefficients end at ``degree``
+    (resolved on more than about 8/7 · degree points a side), while the integrand of I₂, a product
+    of its derivatives with Ω(q), reaches further: the surface counterpart of
+    :func:`band_limited_loop`."""
+    center = np.asarray(center, dtype=float)
+    d = center.size
+    scale = np.full(d, 0.05) if scale is None else np.asarray(scale, dtype=float)
+    S, T = surface_parameters(n_sigma, n_tau)
+    x, y = 2.0 * S - 1.0, 2.0 * T - 1.0
+    q = np.zeros(S.shape + (d,)) + center
+    rng = np.random.default_rng(seed)
+    Tx = np.polynomial.chebyshev.chebvander(x, degree)       # (n_σ, n_τ, degree + 1)
+    Ty = np.polynomial.chebyshev.chebvander(y, degree)
+    for j in range(degree + 1):
+        for l in range(degree + 1):
+            if j == l == 0:
+                continue
+            c = rng.normal(size=d) * scale * decay ** (j + l)
+            q += (Tx[..., j] * Ty[..., l])[..., None] * c
+    return q
+
+
 def henon_loop(n, phase=0.0, a=1.4, b=0.3):
     """PoincareInvariants.jl's test loop (n, 4): the unit circle in both (qᵢ, pᵢ) planes, sampled at
     τ_j = (j + phase)/n, mapped twice by the 4-D Hénon map (two planar Hénon maps coupled through

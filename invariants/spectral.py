@@ -112,6 +112,46 @@ def loop_tail(f, coefficients=None, absolute=None):
     return float(np.max(fh[top:]) / peak) if peak > 0 else 0.0
 
 
+def top_mode(K):
+    """The first mode of the top eighth of modes 0 … K (:func:`tail_model`'s)."""
+    return max(1, K - max(K // 8, 2))
+
+
+def decaying(c, axis=0):
+    """Whether the absolute coefficients c (modes along ``axis``) fall towards the top: the top
+    eighth's largest at round-off of the largest of all (ROUNDOFF_FLOOR), or the envelope (the
+    largest coefficient from a mode on) falling by FLAT from the middle of the upper half's lower
+    part to the top eighth (:func:`tail_model`'s reading of a floor).  A spectrum that does so has
+    modes beyond it smaller still (the resolution monitor's assumption); a flat top (a jump, the
+    points' own noise, the folded-back modes of a sampled product such as ϑ(q)) is no such spectrum."""
+    c = np.moveaxis(np.asarray(c), axis, 0)
+    return bool(np.max(c[top_mode(c.shape[0] - 1):]) <= ROUNDOFF_FLOOR * np.max(c) or falling(c))
+
+
+def falling(c, axis=0):
+    """Whether the envelope of the absolute coefficients c (modes along ``axis``) falls by FLAT from
+    the middle of the upper half's lower part to the top eighth: a spectrum, not a floor."""
+    c = np.moveaxis(np.asarray(c), axis, 0)
+    K = c.shape[0] - 1
+    top = top_mode(K)
+    k1 = min(max(1, K // 2), top - 1) if top > 1 else 0
+    k3 = min((k1 + top) // 2, top - 1) if top > 1 else 0
+    return bool(np.max(c[k3:]) >= FLAT * np.max(c[top:]))
+
+
+def top_at_roundoff(c, axes=(0,)):
+    """Whether the absolute coefficients c have their top eighth of modes, along each of ``axes``,
+    within ROUNDOFF_FLOOR of their largest: a sampled function whose modes beyond the samples, which
+    fold onto the top first, are round-off (and stay there: the monitor's assumption)."""
+    c = np.asarray(c)
+    peak = np.max(c)
+    for axis in axes:
+        top = top_mode(c.shape[axis] - 1)
+        if np.max(np.take(c, np.arange(top, c.shape[axis]), axis=axis)) > ROUNDOFF_FLOOR * peak:
+            return False
+    return True
+
+
 ROUNDOFF_FLOOR = 64 * np.finfo(float).eps   # tails within 64 ulps of a column's largest coefficient are round-off
 FLAT = 4.0               # a tail whose envelope falls by less than this over the eighth below the top is a floor
 
@@ -241,7 +281,20 @@ def _model(e_top, e3, e1, peak, top, k1, flat, slow):
     return tau, r, e_top, peak
 
 
-def loop_pairing_error(ah, bh, N, absolute=None, tails=False):
+def loop_shifted(ch, N, phase):
+    """Samples at τ_j = (j + phase)/N of the trigonometric interpolant whose coefficients (rfft / N)
+    are ``ch`` (N//2 + 1, ...), the Nyquist mode of an even N dropped (as :func:`loop_derivative`
+    drops it): the interpolant evaluated between the samples, and its coefficients there,
+    (values (N, ...), coefficients).  ``phase`` in [0, 1): a fraction of the grid step."""
+    k = np.arange(ch.shape[0], dtype=float)
+    c = ch * np.exp(2j * np.pi * k * (phase / N)).reshape((-1,) + (1,) * (ch.ndim - 1))
+    if N % 2 == 0:
+        c[-1] = 0.0
+    _, inv = _plans((N,) + ch.shape[1:])
+    return inv(c * N).copy(), c
+
+
+def loop_pairing_error(ah, bh, N, absolute=None, tails=False, model=(True, True)):
     """An estimate, erring large, of the error of :func:`loop_pairing` (∮ a·b′ dτ from N samples)
     from the two factors' Fourier coefficients ``ah``, ``bh`` (K + 1, d) (rfft / N).
 
@@ -258,6 +311,8 @@ def loop_pairing_error(ah, bh, N, absolute=None, tails=False):
     4π Σ k |â_k||b̂_k| (which can be 10⁴ times the value on a loop that shear has stretched: the terms
     cancel).  More points lower E, not R.  ``absolute``: (|â|, |b̂|) when already at hand.
     ``tails``: also each factor's :func:`loop_tail`, read off the same spectra: (E, R, tail_a, tail_b).
+    ``model``: whether each factor's modes beyond K are modelled (a factor computed on the loop,
+    such as ϑ(q), needs no model where its aliasing is measured by padding: (False, True)).
     """
     A, B = (np.abs(ah), np.abs(bh)) if absolute is None else absolute
     K = A.shape[0] - 1
@@ -265,7 +320,7 @@ def loop_pairing_error(ah, bh, N, absolute=None, tails=False):
     k = _modes(K, A.ndim)
     m = N - k                                                   # the alias partner, ≥ K ≥ top
     e = 0.0
-    pos_a, pos_b = tau_a > 0, tau_b > 0                         # columns whose tail is a spectrum
+    pos_a, pos_b = (tau_a > 0) & model[0], (tau_b > 0) & model[1]    # columns whose tail is a spectrum
     for tau, r, t0, other, pos in ((tau_a, r_a, ta, B, pos_a), (tau_b, r_b, tb, A, pos_b)):
         if pos.any():
             live = np.flatnonzero(np.ravel(pos))
@@ -341,6 +396,15 @@ def chebyshev_values(c, axis):
     sl[axis] = slice(1, n - 1)
     c[tuple(sl)] /= 2
     return np.flip(scipy.fft.dct(c, type=1, axis=axis, overwrite_x=True), axis=axis)
+
+
+def chebyshev_refined(v, shape):
+    """Values at the ascending Chebyshev points of ``shape`` (m_σ, m_τ) of the tensor interpolant of
+    v (n_σ, n_τ, ...) at its own points: its coefficients padded with zeros (m ≥ n)."""
+    c = chebyshev_coefficients(chebyshev_coefficients(v, 0), 1)
+    pad = np.zeros(tuple(shape) + v.shape[2:])
+    pad[:v.shape[0], :v.shape[1]] = c
+    return chebyshev_values(chebyshev_values(pad, 0), 1)
 
 
 @njit(cache=True, error_model="numpy")
