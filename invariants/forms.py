@@ -337,7 +337,7 @@ class _LoopLevels:
     def __init__(self, qh, lh, ramp, N):
         self.qh, self.lh, self.ramp, self.N = qh, lh, ramp, N
         self._points = {}
-        self._truncated = None
+        self._truncated = {}
 
     def points(self, phase):
         """(q, r, r's coefficients, λ, λ's coefficients) at τ_j = (j + phase)/N."""
@@ -348,13 +348,13 @@ class _LoopLevels:
             self._points[phase] = (q, r, rh, lam, lh)
         return self._points[phase]
 
-    def truncated(self):
-        """The same loop without its top eighth of modes (of q and λ)."""
-        if self._truncated is None:
-            top = spectral.top_mode(self.qh.shape[0] - 1)
+    def truncated(self, eighths=1):
+        """The same loop without its top ``eighths`` eighths of modes (of q and λ)."""
+        if eighths not in self._truncated:
+            top = _cut_mode(self.qh.shape[0] - 1, eighths)
             cut = lambda c: None if c is None else np.concatenate([c[:top], np.zeros_like(c[top:])])
-            self._truncated = _LoopLevels(cut(self.qh), cut(self.lh), self.ramp, self.N)
-        return self._truncated
+            self._truncated[eighths] = _LoopLevels(cut(self.qh), cut(self.lh), self.ramp, self.N)
+        return self._truncated[eighths]
 
 
 def _loop_sum(coefficients, levels, phase, ramp):
@@ -389,15 +389,36 @@ def _loop_value(coefficients, levels, value, roundoff, ramp):
     return _padded(value_at, float(value), roundoff, PADDING_MAX)
 
 
-def _truncation_effect(coefficients, levels, level, value, ramp):
-    """|value − the same sum on the loop without its top eighth of modes|: what the modes at the edge
-    of the samples' resolution add to the value, measured (the modes beyond N/2, smaller where the
-    spectrum decays, add less).  None where the truncated loop leaves the form's domain."""
-    cut = levels.truncated()
-    terms = [_loop_sum(coefficients, cut, j / level, ramp) for j in range(level)]
-    if any(v is None for v in terms):
-        return None
-    return abs(value - math.fsum(terms) / level)
+def _cut_mode(K, eighths):
+    """The first mode cut when the top ``eighths`` eighths of modes 0 … K are left out (1: the
+    monitor's top eighth, spectral.top_mode; 2: the eighth below it too)."""
+    top = spectral.top_mode(K)
+    return max(1, top - (eighths - 1) * (K + 1 - top))
+
+
+def _beyond(value, cut1, cut2):
+    """What the modes beyond the samples add, from what the top eighth adds (E1 = |value − cut1|) and
+    the eighth below it (E2 = |cut1 − cut2|): E1·r/(1 − r) with r = E1/E2 where the effects fall by
+    r ≤ ½ an eighth (the next eighths, beyond the samples, falling as these did), E1 itself where
+    they do not."""
+    e1, e2 = abs(value - cut1), abs(cut1 - cut2)
+    r = e1 / e2 if e2 > 0 else 1.0
+    return e1 * r / (1.0 - r) if r <= 0.5 else e1
+
+
+def _truncation_effect(coefficients, levels, level, value, ramp, floor=False):
+    """What the modes beyond the samples add to the value (:func:`_beyond`), from the same sum on the
+    loop without its top eighth of modes and without its top two: the effects of the modes at the
+    edge of the samples' resolution, measured; for a ``floor`` (the points' own noise), what the top
+    eighth itself adds.  None where a truncated loop leaves the form's domain."""
+    cuts = []
+    for eighths in ((1,) if floor else (1, 2)):
+        cut = levels.truncated(eighths)
+        terms = [_loop_sum(coefficients, cut, j / level, ramp) for j in range(level)]
+        if any(v is None for v in terms):
+            return None
+        cuts.append(math.fsum(terms) / level)
+    return abs(value - cuts[0]) if floor else _beyond(value, *cuts)
 
 
 def first_invariants(q, forms, system=None, p=None, lam=None, h=None, period=None) -> dict:
@@ -492,7 +513,7 @@ def _padded_loop_form(coefficients, levels, value, roundoff, ramp, tail, floor):
     value, move, level, why = _loop_value(coefficients, levels, value, roundoff, ramp)
     rounding = 0.0
     if move is not None and tail * roundoff / (8 * EPS) > CONVERGED * abs(value):
-        cut = _truncation_effect(coefficients, levels, level, value, ramp)
+        cut = _truncation_effect(coefficients, levels, level, value, ramp, floor)
         if cut is None:
             move, why = move + tail * abs(value), why or "the set without its top modes leaves the form's domain"
         elif floor:
@@ -668,15 +689,18 @@ def second_invariants(q, forms, system=None, p=None, lam=None, h=None, paper_sig
                 return spectral.surface_integral(got) if np.all(np.isfinite(got)) else None
             value, error, level, why = _padded(value_at, float(value), roundoff, PADDING_MAX // 2)
             if error is not None and res * roundoff / (8 * EPS) > CONVERGED * abs(value):   # (as for loops)
-                cut = value_at(level, grid=grid.truncated()) if level > 1 else None
-                if cut is None:
+                cut = value_at(level, grid=grid.truncated(1)) if level > 1 else None
+                cut2 = value_at(level, grid=grid.truncated(2)) if cut is not None else None
+                if cut is None or cut2 is None:
                     error += res * abs(value)
                     why = why or "the set without its top modes leaves the form's domain"
                 elif not any(spectral.falling(c, axis) and not spectral.top_at_roundoff(c, (axis,))
                              for c in spectra for axis in (0, 1)):   # a floor: the points' own (as for loops)
                     roundoff += abs(value - cut)
-                else:
+                elif form == "canonical":     # p is samples: its folded modes are not the interpolant's
                     error += abs(value - cut)
+                else:
+                    error += _beyond(value, cut, cut2)
         if error is None:              # not padded: the model of the integrand's Clenshaw–Curtis error
             error = spectral.surface_quadrature_error(integrand)
         out[form] = _value(value, error, roundoff, 0.0 if decays else res, why, level)
@@ -703,15 +727,16 @@ class _SurfaceGrid:
         self.qs, self.qt, self.ps, self.pt, self.ls, self.lt = derivatives
         self._levels, self._integrands = {}, {}
 
-    def truncated(self):
-        """The same surface without its top eighth of Chebyshev modes in either direction (of q, p, λ)."""
+    def truncated(self, eighths=1):
+        """The same surface without its top ``eighths`` eighths of Chebyshev modes in either direction
+        (of q, p, λ)."""
         def cut(v):
             if v is None:
                 return None
             c = spectral.chebyshev_coefficients(spectral.chebyshev_coefficients(v, 0), 1)
             ns, nt = c.shape[:2]
-            c[spectral.top_mode(ns - 1):] = 0.0
-            c[:, spectral.top_mode(nt - 1):] = 0.0
+            c[_cut_mode(ns - 1, eighths):] = 0.0
+            c[:, _cut_mode(nt - 1, eighths):] = 0.0
             return spectral.chebyshev_values(spectral.chebyshev_values(c, 0), 1)
         qu = cut(self.qu)
         return _SurfaceGrid(qu, qu, cut(self.p), cut(self.lam))
