@@ -759,8 +759,9 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
     ``mode`` MODE_MAIN solves the step's equations (:func:`_main`), MODE_POST the consecutive projection
     (its post term ``P.post``: :func:`project` for the paper's).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
     ``known``: LU and piv hold its last step's factors) and again after an iteration that shrank
-    its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ TOL, or ≤ STALL once
-    the update stops halving; for complex z the imaginary part, read as a derivative, must pass the
+    its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ STALL once the
+    update stops halving, or ≤ TOL (0 by default: every step ends at its round-off floor, so what
+    it leaves is round-off and not a remainder of one sign: Brouwer's law, docs/brouwer.md); for complex z the imaginary part, read as a derivative, must pass the
     same test.  A lane that is done is held at its solution ``zev`` (the last iterate at which its
     residual was evaluated; every buffer the equations fill holds that evaluation) while the others
     go on.  Lanes to solve: ``f.active``; the outcome per lane in ``f.ok`` and ``f.its``.  The

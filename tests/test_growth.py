@@ -89,7 +89,9 @@ def test_a_run_file_carries_the_laws_and_the_summary_shows_them(tmp_path, capsys
             g = f["runs"][pair]
             for key in ("I1/noncanonical", "I2/corrected", "energy_error"):
                 assert g[key].attrs["growth_law"] in LAWS
-                assert np.isfinite(g[key].attrs["growth_exponent"])
+                # a round-off series may have too few windows with a nonzero maximum for a slope
+                # (docs/growth.md): GLRK1-midpoint's energy error is exactly 0 at 7 of 21 outputs
+                assert np.isfinite(g[key].attrs["growth_exponent"]) or g[key].attrs["growth_law"] == "round-off"
     run = read_run(out)
     law, alpha, err, onset, logc = run["GLRK1-standard"].growth["I2 noncanonical"]
     assert law == "linear" and abs(alpha - 1.0) < 0.1
