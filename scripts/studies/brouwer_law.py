@@ -26,6 +26,7 @@ older rules over the first ``--before-steps`` (2·10⁵) steps, the issue's meas
     python scripts/studies/brouwer_law.py --json docs/figures/brouwer_law.json        # about 1.5 h
     python scripts/studies/brouwer_law.py --cases pendulum --tableaus GLRK4 --steps 200000
     python scripts/studies/brouwer_law.py --markdown docs/figures/brouwer_law.json   # the table
+    python scripts/studies/brouwer_law.py --speed          # what it costs: point-steps/s, one thread
 
 The double-double runs do not depend on the rule: they are cached (``--cache``, default
 $POINCARE_CACHE/brouwer or ~/.cache/poincare/brouwer) and reused by later runs of the script.
@@ -285,6 +286,39 @@ def markdown(rows):
     return out
 
 
+SPEED_PAIRS = (("GLRK1", "none"), ("GLRK2", "symmetric"), ("GLRK2", "symplectic"), ("SRK3", "symmetric"),
+               ("GLRK4", "symmetric"), ("GLRK6", "symmetric"))
+
+
+def speed(points=10_000, steps=20, rounds=3):
+    """Point-steps per second of the default against the fixed 4 ulps: guiding_centre_symmetric,
+    h = 10, ``points`` near the default loop, ``steps`` steps after 2 (the history filled), one
+    thread, the two rules alternating, best of ``rounds``; iterations a point-step beside."""
+    import invariants
+    integrators.set_threads(1)
+    sy = integrators.system("guiding_centre_symmetric")
+    q0 = invariants.loop("guiding_centre", points)
+    out = []
+    for tab, proj in SPEED_PAIRS:
+        best, its = {}, {}
+        for _ in range(rounds):
+            for name in ("now", "fixed"):
+                e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=rules()[name])
+                st = e.state(q0)
+                e.advance(st, 1, 2)
+                before = st.iterations.sum()
+                t = time.perf_counter()
+                e.advance(st, 3, steps)
+                best[name] = min(best.get(name, np.inf), time.perf_counter() - t)
+                its[name] = (st.iterations.sum() - before) / (points * steps)
+        row = dict(pair=f"{tab}-{proj}", **{f"{k}_per_s": points * steps / v for k, v in best.items()},
+                   **{f"{k}_iterations": v for k, v in its.items()})
+        out.append(row)
+        print(f"| {row['pair']} | {row['fixed_per_s']:,.0f} | {row['now_per_s']:,.0f} | "
+              f"{row['now_per_s'] / row['fixed_per_s']:.2f} | {its['fixed']:.2f} → {its['now']:.2f} |", flush=True)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=lambda s: s.split(","), default=["pendulum", "kepler", "degenerate"])
@@ -300,7 +334,13 @@ def main(argv=None):
     ap.add_argument("--cache", default=None)
     ap.add_argument("--json", default=None, help="write the rows here (appending to what is there)")
     ap.add_argument("--markdown", default=None, nargs="+", metavar="JSON", help="print the table of rows files and stop")
+    ap.add_argument("--speed", action="store_true", help="point-steps per second of the default against the fixed "
+                    "4 ulps (one thread) and stop")
     args = ap.parse_args(argv)
+    if args.speed:
+        print("| pair | fixed 4 ulps | default | default / fixed | it./step |\n|---|---:|---:|---:|---|")
+        speed()
+        return 0
     if args.markdown:
         print(markdown([r for f in args.markdown for r in json.loads(Path(f).read_text())["rows"]]))
         return 0
