@@ -251,7 +251,7 @@ class State:
                 self.jac_z, self.jac_q, self.jac_lam, self.defects, self.orders)
 
 
-FIXED_TOL = 4 * np.finfo(np.float64).eps   # a fixed Newton tolerance of 4 ulps: the rule before issue 70
+FIXED_TOL = 4 * np.finfo(np.float64).eps   # a fixed Newton tolerance of 4 ulps: faster, and its round-off drifts (docs/brouwer.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -261,11 +261,10 @@ class Tolerances:
     tol : converged when max |δ|/scale ≤ tol; under ``predictor="defects"`` not before the
         second iteration.  Default 0: Newton goes on until its update stops halving (``stall``
         below), so every step ends at the round-off floor of its equations.  A fixed tolerance
-        (4 eps until issue 70) stops one iteration short of it, from a guess whose error is
+        (``FIXED_TOL``, 4 eps) stops one iteration short of it, from a guess whose error is
         smooth in time, and leaves a remainder of the same sign step after step: the round-off
-        of the energy then drifts (GLRK4-none on the pendulum grew as t^0.74 over 2·10⁵ steps)
-        where Brouwer's law is √t (Hairer, McLachlan & Razakarivony, BIT 48, 2008;
-        docs/brouwer.md)
+        of the energy then drifts where Brouwer's law is √t (Hairer, McLachlan & Razakarivony,
+        BIT 48, 2008; docs/brouwer.md), for 4-30 % more speed
     stall : converged when the update is ≤ stall and no longer halves (the round-off floor;
         default 1e-10)
     stall_complex : the same for the audit's complex-step derivatives (default 1e-13)
@@ -325,8 +324,9 @@ class Tolerances:
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
 
-    ``Tolerances(predictor="extrapolate", tol=FIXED_TOL)`` is the engine's rule before issue 55,
-    bitwise; ``Tolerances(tol=FIXED_TOL)`` the rule before issue 70.
+    ``Tolerances(predictor="extrapolate", tol=FIXED_TOL)`` is the polynomial guess alone at a fixed
+    tolerance and ``Tolerances(tol=FIXED_TOL)`` the defects' guess at a fixed tolerance, bitwise the
+    rules docs/benchmarks-history.md compares.
     """
 
     tol: float = 0.0
