@@ -27,6 +27,8 @@ older rules over the first ``--before-steps`` (2·10⁵) steps, the issue's meas
     python scripts/studies/brouwer_law.py --cases pendulum --tableaus GLRK4 --steps 200000
     python scripts/studies/brouwer_law.py --markdown docs/figures/brouwer_law.json   # the table
     python scripts/studies/brouwer_law.py --speed          # what it costs: point-steps/s, one thread
+    python scripts/studies/brouwer_law.py --cases kepler --tableaus GLRK6 --starts 32 \
+        --rule 'fresh={"trust_max_unknowns": 64, "trust_floor": 0, "refresh_floor": 0}'   # another rule beside
 
 The double-double runs do not depend on the rule: they are cached (``--cache``, default
 $POINCARE_CACHE/brouwer or ~/.cache/poincare/brouwer) and reused by later runs of the script.
@@ -69,8 +71,12 @@ DEGENERATE_TABLEAUS = ("GLRK1", "GLRK2", "GLRK3", "GLRK4", "GLRK5", "GLRK6", "SR
 DEGENERATE_PROJECTIONS = ("standard", "symmetric", "symplectic", "midpoint")
 
 
+EXTRA_RULES = {}          # --rule NAME=JSON: more Tolerances, run over the whole run as "now" is
+
+
 def rules():
-    return {"now": integrators.Tolerances(),
+    return {**{name: integrators.Tolerances(**kw) for name, kw in EXTRA_RULES.items()},
+            "now": integrators.Tolerances(),
             "fixed": integrators.Tolerances(tol=FIXED_TOL),
             "extrapolate": integrators.Tolerances(predictor="extrapolate", tol=FIXED_TOL)}
 
@@ -203,7 +209,7 @@ def measure(system, q0, tableau, projection, h, steps, before_steps, every, cach
                            f"the phase the round-off walks would move it by more than 1 % of the round-off")
         return out
     for name, tol in rules().items():
-        n_steps = steps if name == "now" else min(before_steps, steps)
+        n_steps = min(before_steps, steps) if name in ("fixed", "extrapolate") else steps
         t = time.perf_counter()
         sol = integrators.integrate(system, q0, tableau=tableau, projection=projection, h=h, steps=n_steps,
                                     save_every=every, tolerances=tol)
@@ -334,9 +340,15 @@ def main(argv=None):
     ap.add_argument("--cache", default=None)
     ap.add_argument("--json", default=None, help="write the rows here (appending to what is there)")
     ap.add_argument("--markdown", default=None, nargs="+", metavar="JSON", help="print the table of rows files and stop")
+    ap.add_argument("--rule", action="append", default=[], metavar="NAME=JSON",
+                    help='another rule beside the three, e.g. fresh=\'{"trust_max_unknowns": 64, "trust_floor": 0}\'')
     ap.add_argument("--speed", action="store_true", help="point-steps per second of the default against the fixed "
                     "4 ulps (one thread) and stop")
     args = ap.parse_args(argv)
+    for text in args.rule:
+        name, _, kw = text.partition("=")
+        EXTRA_RULES[name] = json.loads(kw)
+        integrators.Tolerances(**EXTRA_RULES[name])          # a bad field fails here, before any run
     if args.speed:
         print("| pair | fixed 4 ulps | default | default / fixed | it./step |\n|---|---:|---:|---:|---|")
         speed()
@@ -358,7 +370,10 @@ def main(argv=None):
         print(f"{system.name} {tab}-{proj} h={h:g}: " + (row.get("left_out") or
               f"exponent {now['exponent']:.3f} ± {now['exponent_spread']:.3f}, it./step {now['iterations']:.2f}, "
               f"RMS {now['rms_end']:.1e}; fixed {row['rules']['fixed']['exponent']:.3f}, "
-              f"extrapolate {row['rules']['extrapolate']['exponent']:.3f}") + f" ({time.perf_counter() - t:.0f} s)",
+              f"extrapolate {row['rules']['extrapolate']['exponent']:.3f}" +
+              "".join(f"; {k} {row['rules'][k]['exponent']:.3f} ± {row['rules'][k]['exponent_spread']:.3f}, it./step "
+                      f"{row['rules'][k]['iterations']:.2f}, mean/RMS {row['rules'][k]['mean_end'] / row['rules'][k]['rms_end']:+.2f}"
+                      for k in EXTRA_RULES)) + f" ({time.perf_counter() - t:.0f} s)",
               flush=True)
         if args.json:
             Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
