@@ -22,8 +22,9 @@ from .projections import PROJECTIONS
 from .systems import SYSTEM_NAMES, System, system, system_from
 from .tableaus import TABLEAU_NAMES, Tableau, tableau, tableau_from_arrays, tableau_from_file
 from .equilibrium import EquilibriumError, system_from_geqdsk
+from .boozer import BoozerError, read_boozmn, system_from_boozer
 
 __all__ = ["integrate", "Solution", "system", "system_from", "System", "SYSTEM_NAMES", "tableau",
            "tableau_from_file", "tableau_from_arrays", "Tableau", "TABLEAU_NAMES", "PROJECTIONS", "Engine", "State", "Tolerances", "march",
-           "set_threads", "system_from_geqdsk", "EquilibriumError"]
+           "set_threads", "system_from_geqdsk", "EquilibriumError", "system_from_boozer", "read_boozmn", "BoozerError"]
 __version__ = "0.1.0"

@@ -1,0 +1,204 @@
+"""Guiding centres in Boozer coordinates from boozmn files (integrators/boozer.py, issue 71).
+
+* the two shipped simsopt files are read: the interpolated modes give back the file's own Fourier
+  sum on every kept surface, ι, G, I their half-grid values, the Cartesian harmonics the Fourier
+  sum; the radial interpolant does not overshoot li383's four surfaces;
+* a file that is not a usable boozmn file is refused in one line;
+* (slow) the compiled engine: the field-line map's winding is the file's ι to 1e-9; the system's
+  |B| is the Fourier sum's to the grid's accuracy; in the axisymmetric file P_ζ and the energy are
+  kept to round-off by projected pairs, also by orbits through the axis region and one started on
+  the axis; li383's default orbits run.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.io import netcdf_file
+
+import integrators
+from integrators.boozer import BoozerError, field_line_system, read_boozmn, system_from_boozer
+
+SCENES = Path(integrators.__file__).parent / "service" / "scenes"
+CIRCULAR = SCENES / "boozmn_circular_tokamak.nc"
+LI383 = SCENES / "boozmn_li383_low_res.nc"
+
+
+@pytest.fixture(scope="module")
+def files():
+    return {"circular": read_boozmn(CIRCULAR), "li383": read_boozmn(LI383)}
+
+
+def test_reads_the_shipped_files(files):
+    c, li = files["circular"], files["li383"]
+    assert (c.nfp, c.ns, c.xm.size, c.s.size, c.asym) == (1, 17, 48, 16, False)
+    assert (li.nfp, li.ns, li.xm.size, li.s.size, li.asym) == (3, 16, 1040, 4, False)
+    np.testing.assert_allclose(li.s, (np.array([2, 3, 4, 16]) - 1.5) / 15, rtol=0, atol=1e-15)
+    assert np.all(li.xn % 3 == 0)                                # n carries the field periods
+    assert c.psi0 == pytest.approx(67.8603 / (2 * np.pi), rel=1e-5)   # phi_b's last value over 2π
+
+
+@pytest.mark.parametrize("name", ["circular", "li383"])
+def test_modes_give_back_the_files_fourier_sum(files, name):
+    """With every mode kept, the interpolated |B| on each kept surface is the file's own sum."""
+    bz = files[name]
+    th, ze = np.meshgrid(np.linspace(0, 2 * np.pi, 41), np.linspace(0, 2 * np.pi / bz.nfp, 17))
+    b00 = abs(bz.bmnc[0, 0])
+    for j, s in enumerate(bz.s):
+        err = np.abs(bz.modB(np.full(th.shape, s), th, ze, modes_tol=0) - bz.surface_modB(j, th, ze))
+        assert err.max() <= 1e-13 * b00, (j, err.max())
+
+
+@pytest.mark.parametrize("name", ["circular", "li383"])
+def test_profiles_interpolate_the_half_grid(files, name):
+    bz = files[name]
+    iota, G, Is, psip = bz.profiles()
+    np.testing.assert_allclose(iota(bz.s_half), bz.iota, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(G(bz.s_half), bz.G, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(Is(bz.s_half) * bz.s_half, bz.I, rtol=1e-12, atol=1e-15)
+    assert psip(0.0) == 0.0
+    s = np.linspace(0.05, 0.95, 7)     # ψ_p is ι's antiderivative: a centred difference of it is ι
+    e = 1e-5
+    np.testing.assert_allclose((psip(s + e) - psip(s - e)) / (2 * e), iota(s), rtol=1e-8)
+
+
+@pytest.mark.parametrize("name", ["circular", "li383"])
+def test_harmonics_sum_to_the_fourier_sum(files, name):
+    bz = files[name]
+    rng = np.random.default_rng(71)
+    s, th, ze = rng.uniform(0, 1, 300), rng.uniform(-np.pi, np.pi, 300), rng.uniform(0, 2 * np.pi, 300)
+    r = np.sqrt(2 * bz.psi0 * s)
+    harm = bz.harmonics(r * np.cos(th), r * np.sin(th))
+    B = sum(C * np.cos(n * ze) + (S * np.sin(n * ze) if S is not None else 0.0) for n, (C, S) in harm.items())
+    ref = bz.modB(s, th, ze)
+    assert np.max(np.abs(B / ref - 1)) < 1e-12
+    assert sorted(harm) == sorted(set(np.abs(bz.xn[bz.modes()[0]]).tolist()))
+
+
+def test_radial_interpolation_stays_within_the_data(files):
+    """li383's transform kept 4 surfaces (s = 0.033 … 0.967): between them no mode exceeds 3.5 times
+    its largest value on the surfaces (measured 3.18 over all 1,040 modes; a cubic spline of b/s^{m/2}
+    overshoots by 10²–10⁴ there)."""
+    bz = files["li383"]
+    keep, p, cs, _ = bz.modes(0)
+    s = np.linspace(0, 1, 2001)
+    b = cs(s) * s[:, None] ** (p / 2)
+    ratio = np.abs(b).max(0) / np.maximum(np.abs(bz.bmnc[:, keep]).max(0), 1e-300)
+    assert ratio.max() < 3.5
+
+
+def _copy(src, dst, drop=(), change=None):
+    """A copy of the NetCDF file src at dst without the variables ``drop``, with ``change[name] = array``."""
+    change = change or {}
+    with netcdf_file(str(src), "r", mmap=False) as a, netcdf_file(str(dst), "w") as b:
+        for name, var in a.variables.items():
+            if name in drop:
+                continue
+            data = np.asarray(change.get(name, var.data), dtype=var.data.dtype)
+            dims = tuple(f"{name}_{i}" for i in range(data.ndim))
+            for dim, n in zip(dims, data.shape):
+                b.createDimension(dim, n)
+            out = b.createVariable(name, data.dtype, dims)
+            if data.ndim:
+                out[:] = data
+            else:
+                out.data[()] = data         # (assignValue indexes a 0-d array with [:] in this scipy)
+    return dst
+
+
+def test_refuses_what_it_cannot_use(tmp_path, files):
+    bad = tmp_path / "text.nc"
+    bad.write_text("not a netcdf file\n")
+    cases = {
+        "not a NetCDF 3 boozmn file": bad,
+        "no bmnc_b": _copy(CIRCULAR, tmp_path / "nobmn.nc", drop=("bmnc_b",)),
+        "bmnc_b has shape": _copy(CIRCULAR, tmp_path / "shape.nc", change={"bmnc_b": files["circular"].bmnc[:, :40]}),
+        "only Φ > 0": _copy(CIRCULAR, tmp_path / "neg.nc", change={"phi_b": -np.linspace(0, 67.86, 17)}),
+        "no such file": tmp_path / "missing.nc",
+    }
+    for what, path in cases.items():
+        with pytest.raises(BoozerError) as err:
+            read_boozmn(path)
+        msg = str(err.value)
+        assert "\n" not in msg and msg.startswith(str(path)) and what in msg, msg
+
+
+# -- the compiled engine --------------------------------------------------------------------------
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", [CIRCULAR, LI383])
+def test_field_line_winding_is_the_files_iota(path):
+    """θ(ζ) of the field-line system over 20 toroidal turns (GLRK4, 200 steps a turn): its winding
+    is the file's iota_b on the half grid to 1e-9 (measured 5e-10 on li383, 1e-13 on the circular
+    file, whose ι is linear in s)."""
+    bz = read_boozmn(path)
+    js = np.arange(1, bz.s_half.size, 2)
+    r = np.sqrt(2 * bz.psi0 * bz.s_half[js])
+    turns, per = 20, 200
+    sol = integrators.integrate(field_line_system(bz), np.stack([r, 0 * r], 1), tableau="GLRK4", projection="none",
+                                h=2 * np.pi / per, steps=per * turns, save_every=1)
+    ang = np.unwrap(np.arctan2(sol.q[..., 1], sol.q[..., 0]), axis=0)
+    winding = (ang[-1] - ang[0]) / (2 * np.pi * turns)
+    assert np.max(np.abs(winding - bz.iota[js])) < 1e-9
+
+
+@pytest.fixture(scope="module")
+def circular_system():
+    return system_from_boozer(CIRCULAR, grid=64)
+
+
+@pytest.mark.slow
+def test_system_field_is_the_fourier_sum(circular_system):
+    """The compiled |B| (quintic splines on a 64² grid) against the Fourier sum of the same modes at
+    300 points with s < 0.98: within 1e-5 relative (measured 4.5e-6 with 12 modes at 1e-6; here 7)."""
+    sy, bz = circular_system, circular_system.boozer
+    rng = np.random.default_rng(3)
+    s, th, ze = rng.uniform(0, 0.98, 300), rng.uniform(0, 2 * np.pi, 300), rng.uniform(0, 2 * np.pi, 300)
+    r = np.sqrt(2 * bz.psi0 * s)
+    q = np.stack([r * np.cos(th), r * np.sin(th), ze, 0 * s], 1)
+    B = sy.H(q) / sy.param_values["mu"]
+    assert np.max(np.abs(B / bz.modB(s, th, ze) - 1)) < 1e-5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tableau,projection", [("GLRK2", "standard"), ("GLRK2", "symmetric"), ("GLRK4", "symmetric")])
+def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_system, tableau, projection):
+    """The circular tokamak (n = 0 only: ∂/∂ζ is a symmetry, P_ζ = ρG − ψ_p): eight trapped guiding
+    centres started on a circle of radius 0.02 r₁ about the axis (their orbits come to 0.0033 r₁ of
+    it), one started on the axis itself, and the default passing and trapped ones; 4,000 steps of
+    the default h.  No point breaks down; P_ζ is kept to round-off by the axis family (measured ≤
+    1.4e-14 relative) and by every orbit under the standard projection, which keeps momentum maps
+    exactly (the symmetric projection does not: the passing orbit's 2.0e-12 with GLRK2, as on the
+    Solov'ev system in test_systems.py); the axis family's energy too (measured ≤ 5.7e-14; the passing
+    orbit's energy error is the method's truncation, 1.1e-9 for GLRK2)."""
+    sy, bz = circular_system, circular_system.boozer
+    d = sy.defaults
+    r1 = np.sqrt(2 * bz.psi0)
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    rho = d["trapped"][3]
+    q0 = np.vstack([np.stack([0.02 * r1 * np.cos(ang), 0.02 * r1 * np.sin(ang), 0 * ang, rho + 0 * ang], 1),
+                    [0.0, 0.0, 0.0, rho], d["q0"], d["trapped"]])
+    sol = integrators.integrate(sy, q0, tableau=tableau, projection=projection, h=d["h"], steps=4000, save_every=20)
+    assert np.isinf(sol.breakdown_time).all()
+    E = np.stack([sy.H(sol.q[:, i]) for i in range(len(q0))])
+    P = np.stack([sy.momentum(sol.q[:, i]) for i in range(len(q0))])
+    dP = np.abs(P - P[:, :1]).max(1) / np.abs(P[:, 0])
+    assert dP[:9].max() < 1e-13
+    assert dP.max() < (1e-13 if projection == "standard" else 1e-11)
+    assert np.max(np.abs(E[:9] / E[:9, :1] - 1)) < 5e-13
+    r = np.hypot(sol.q[..., 0], sol.q[..., 1])
+    assert r[:, :8].min() < 0.005 * r1                      # the family does come close to the axis
+
+
+@pytest.mark.slow
+def test_li383_default_orbits_run():
+    """li383 (nfp 3, 114 modes of 1,040 at 1e-4, 8 toroidal harmonics): the default passing and
+    trapped guiding centres, 2,000 steps of GLRK2-symmetric at the default h, stay in the plasma with
+    a bounded energy error (measured 1.6e-7 passing, 1e-11 trapped)."""
+    sy = system_from_boozer(LI383)
+    d = sy.defaults
+    assert d["harmonics"] == (0, 3, 6, 9, 12, 15, 18, 21)
+    sol = integrators.integrate(sy, np.array([d["q0"], d["trapped"]]), tableau="GLRK2", projection="symmetric",
+                                h=d["h"], steps=2000, save_every=100)
+    assert np.isinf(sol.breakdown_time).all()
+    E = np.stack([sy.H(sol.q[:, i]) for i in range(2)])
+    assert np.max(np.abs(E / E[:, :1] - 1)) < 1e-6
