@@ -282,6 +282,8 @@ def cmd_run(args) -> int:
             print(f"note: {note}")
         if scene.system_spec.get("equilibrium"):
             print(_equilibrium_note(scene))
+        if scene.system_spec.get("boozer"):
+            print(_boozer_note(scene))
         if scene.precision == "double-double":
             print("note: run in double-double (run.precision): the states, checkpoints and the energy, momentum and "
                   "constraint errors are double-double; the invariants are computed from the states rounded to "
@@ -305,6 +307,16 @@ def _equilibrium_note(scene) -> str:
     return (f"note: the field is the quintic-spline interpolant of {_printable(spec['equilibrium'])} "
             f"(sha256 {spec['sha256'][:12]}…), read as COCOS {cocos} ({how}); {qtext}; points leaving ψ_N < 1 break "
             f"down (docs/equilibria.md){notes}")
+
+
+def _boozer_note(scene) -> str:
+    """What the summary says of a system read from a boozmn file: the file, its digest, the modes and
+    grid kept, the model (docs/stellarators.md)."""
+    sy = scene.system()
+    spec = scene.system_spec
+    notes = "".join(f"\nnote: {_printable(n)}" for n in sy.defaults.get("notes", ()))
+    return (f"note: the field is read from {_printable(spec['boozer'])} (sha256 {spec['sha256'][:12]}…) in the axis "
+            f"chart (x, y) = √(2ψ)(cos θ, sin θ); points leaving s < 1 break down (docs/stellarators.md){notes}")
 
 
 def _absolute_invariants(path) -> list:

@@ -202,3 +202,57 @@ def test_li383_default_orbits_run():
     assert np.isinf(sol.breakdown_time).all()
     E = np.stack([sy.H(sol.q[:, i]) for i in range(2)])
     assert np.max(np.abs(E / E[:, :1] - 1)) < 1e-6
+
+
+# -- scenes -----------------------------------------------------------------------------------------
+
+def _li383_scene(tmp_path, steps):
+    import shutil
+    shutil.copy(LI383, tmp_path / "boozmn_li383_low_res.nc")
+    scene = tmp_path / "li383.toml"
+    scene.write_text((SCENES / "boozer_li383.toml").read_text().replace("steps = 400", f"steps = {steps}")
+                     .replace("points = 2048", "points = 256").replace("refine_to = 8192", "refine_to = 512")
+                     .replace("n_sigma = 24", "n_sigma = 8").replace("n_tau = 24", "n_tau = 8")
+                     .replace("refine_to = 2209", "refine_to = 225"))
+    return scene
+
+
+def test_a_boozer_scene_is_checked_in_one_line(tmp_path):
+    import shutil
+    from integrators.service.scene import SceneError, load_scene
+    shutil.copy(LI383, tmp_path / "boozmn_li383_low_res.nc")
+    base = (SCENES / "boozer_li383.toml").read_text()
+    for change, words in [(("grid = 96", "grid = 4"), "system.grid"),
+                          (("modes_tol = 0.0001", "modes_tol = 2.0"), "system.modes_tol"),
+                          (('boozer = "boozmn_li383_low_res.nc"', 'boozer = "nowhere.nc"'), "system.boozer: file"),
+                          (("grid = 96", 'grid = 96\ncocos = 3'), "system.cocos cannot go with system.boozer")]:
+        (tmp_path / "s.toml").write_text(base.replace(*change))
+        with pytest.raises(SceneError) as err:
+            load_scene(str(tmp_path / "s.toml")).system()
+        assert words in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+@pytest.mark.slow
+def test_the_li383_scene_runs_every_pair_ok_and_names_the_file(tmp_path, capsys):
+    """The built-in scene (smaller sets, 8 steps): every pair ok, the summary names the file, its
+    digest and the modes kept."""
+    from integrators.cli import main as cli_main
+    scene = _li383_scene(tmp_path, 8)
+    assert cli_main(["run", str(scene), "-o", str(tmp_path / "a.h5")]) == 0
+    said = capsys.readouterr().out
+    assert said.count(" ok ") == 10, said
+    assert "read from boozmn_li383_low_res.nc (sha256 593f78a5469b" in said and "114 kept" in said
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_the_li383_scene_gives_the_same_bits_on_2_ranks(tmp_path):
+    from helpers import dump, poincare, same
+    scene = _li383_scene(tmp_path, 6)
+    files = []
+    for n in (None, 2):
+        out = tmp_path / f"r{n or 1}.h5"
+        r = poincare("run", str(scene), "-o", str(out), "-q", n=n)
+        assert r.returncode == 0, r.stderr[-2000:]
+        files.append(dump(out))
+    assert same(*files)

@@ -25,6 +25,12 @@ A scene file::
     cocos = 3                             # its sign conventions (COCOS index; default: identified from the file)
     params = { mu = 1e-5 }                # the magnetic moment (default from the plasma's size and field)
 
+    [system]                              # ... or guiding centres in a stellarator's Boozer field (docs/stellarators.md)
+    boozer = "boozmn_x.nc"                # a booz_xform boozmn file (NetCDF 3), found as an equilibrium file is
+    modes_tol = 1e-4                      # optional: modes below this fraction of |b_00| are left out
+    grid = 96                             # optional: the (x, y) grid of |B|'s harmonics, points a side
+    params = { mu = 1e-5 }                # optional: the magnetic moment (default from the plasma's size and field)
+
     [system]                              # ... or a canonical phase space with no formula (docs/systems.md)
     name = "pendula"                      # a label
     degrees_of_freedom = 1024             # k: q = (x_0 … x_{k−1}, v_0 … v_{k−1}), the form v·dx; run.step_maps
@@ -374,6 +380,7 @@ _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
     "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
                "momentum": str, "domain": list, "function": str, "equilibrium": str, "cocos": int,
+               "boozer": str, "modes_tol": float, "grid": int,
                "degrees_of_freedom": int, "dimension": int, "one_form": str, "period": object, "energy": str},
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},
@@ -533,6 +540,11 @@ def _system_of(sysd, base, points=MIN_POINTS):
     step maps judges its memory by them before it is built)."""
     if "equilibrium" in sysd:
         return _equilibrium_of(sysd, base)
+    if "boozer" in sysd:
+        return _boozer_of(sysd, base)
+    for k in ("modes_tol", "grid"):
+        if k in sysd:
+            raise SceneError(f"system.{k} belongs to system.boozer (a boozmn file)")
     if "degrees_of_freedom" in sysd or "dimension" in sysd or "one_form" in sysd:
         return _phase_space_of(sysd, base, points)
     for k in ("period", "energy"):
@@ -568,19 +580,42 @@ def _equilibrium_of(sysd, base):
     """[system] equilibrium = "file.geqdsk" (looked up next to the scene, then in the current
     directory), cocos = N, params = {mu = …}: the guiding centre in that equilibrium
     (integrators.equilibrium).  The file is data: it is read, never run."""
-    for k in ("name", "coordinates", "theta", "H", "symmetry", "momentum", "domain", "function"):
+    e, digest, params = _field_file(sysd, base, "equilibrium", ())
+    spec = {"equilibrium": e, "cocos": sysd.get("cocos"), "sha256": digest}
+    return _make_system(spec, params, base), params, spec
+
+
+def _field_file(sysd, base, key, others):
+    """A [system] that a field file brings (``key`` = "equilibrium" or "boozer"): refuses the keys of
+    other kinds of system (and ``others``), finds the file, checks the parameters; returns (the name
+    as given, the file's sha256, the parameters).  The digest belongs to the scene: a resume compares
+    it (a changed file is another field), not where the file lies, which may differ between a run
+    and its resume."""
+    for k in ("name", "coordinates", "theta", "H", "symmetry", "momentum", "domain", "function") + others:
         if k in sysd:
-            raise SceneError(f"system.{k} cannot go with system.equilibrium (the file brings the system)")
+            raise SceneError(f"system.{k} cannot go with system.{key} (the file brings the system)")
     import hashlib
-    e = sysd["equilibrium"]
-    found = _data_file(e, base, "system.equilibrium: file")
+    e = sysd[key]
+    found = _data_file(e, base, f"system.{key}: file")
     params = dict(sysd.get("params", {}))
     for k, v in params.items():
         if not _finite(v):
             raise SceneError(f"system.params.{k} must be a finite number, got {v!r}")
-    # the file's digest belongs to the scene: a resume compares it (a changed file is another field),
-    # not where the file lies, which may differ between a run and its resume
-    spec = {"equilibrium": e, "cocos": sysd.get("cocos"), "sha256": hashlib.sha256(found.read_bytes()).hexdigest()}
+    return e, hashlib.sha256(found.read_bytes()).hexdigest(), params
+
+
+def _boozer_of(sysd, base):
+    """[system] boozer = "boozmn_x.nc" (looked up as an equilibrium file is), modes_tol, grid,
+    params = {mu = …}: the guiding centre in that Boozer field (integrators.boozer).  The file is
+    data: it is read, never run."""
+    e, digest, params = _field_file(sysd, base, "boozer", ("equilibrium", "cocos"))
+    tol = sysd.get("modes_tol", 1e-4)
+    if not (_finite(tol) and 0 <= tol < 1):
+        raise SceneError(f"system.modes_tol must be a number in [0, 1), got {tol!r}")
+    grid = sysd.get("grid", 96)
+    if not 16 <= grid <= 1024:
+        raise SceneError(f"system.grid must be between 16 and 1024 points a side, got {grid}")
+    spec = {"boozer": e, "modes_tol": float(tol), "grid": int(grid), "sha256": digest}
     return _make_system(spec, params, base), params, spec
 
 
@@ -738,6 +773,17 @@ def _make_system(spec, params, base):
             return made.with_params(**rest) if rest else made
         except EquilibriumError as exc:
             raise SceneError(f"system.equilibrium: {exc}") from None
+        except ValueError as exc:
+            raise SceneError(f"system.params: {exc}") from None
+    if "boozer" in spec:
+        from ..boozer import BoozerError, system_from_boozer
+        rest = {k: v for k, v in params.items() if k != "mu"}
+        try:
+            made = system_from_boozer(_data_file(spec["boozer"], base, "system.boozer: file"), mu=params.get("mu", None),
+                                      modes_tol=spec.get("modes_tol", 1e-4), grid=spec.get("grid", 96))
+            return made.with_params(**rest) if rest else made
+        except BoozerError as exc:
+            raise SceneError(f"system.boozer: {exc}") from None
         except ValueError as exc:
             raise SceneError(f"system.params: {exc}") from None
     if "degrees_of_freedom" in spec or "one_form" in spec:
@@ -1074,6 +1120,65 @@ def scene_source(spec: str | None) -> tuple:
     return text, path
 
 
+def _file_scene_sets(loop_center, loop_radius, surface_center, surface_side, h, steps, name, output) -> str:
+    """The [loop] … [output] tables of a scene written from a file's defaults (:func:`boozer_scene`,
+    :func:`equilibrium_scene`): a 2,048-point circle refining to 8,192, a 24 × 24 square refining to
+    47 × 47, both in the plane (0, 1), GLRK1 and GLRK2 with every projection, every form."""
+    def vec(*x):
+        return ", ".join(repr(float(c)) for c in x)
+    return f'''[loop]
+shape = "ellipse"
+points = 2048
+refine_to = 8192
+params = {{ d = 4, center = [{vec(*loop_center)}], radii = [{vec(loop_radius, loop_radius)}], plane = [0, 1] }}
+
+[surface]
+shape = "rectangle"
+n_sigma = 24
+n_tau = 24
+refine_to = 2209
+params = {{ d = 4, center = [{vec(*surface_center)}], size = [{vec(surface_side, surface_side)}], plane = [0, 1] }}
+
+[run]
+tableaus = ["GLRK1", "GLRK2"]
+projections = ["none", "standard", "symmetric", "symplectic", "midpoint"]
+h = {h!r}
+steps = {int(steps)}
+output_every = {max(1, int(steps) // 100)}
+forms = ["canonical", "noncanonical", "corrected"]
+
+[output]
+path = "{output or name + '.h5'}"
+'''
+
+
+def boozer_scene(path, *, name=None, steps=1000, output=None, modes_tol=1e-4, grid=96) -> str:
+    """The TOML text of a scene built from a boozmn file's own defaults (docs/stellarators.md), as
+    :func:`equilibrium_scene` does for G-EQDSK files: the loop (2,048 points, refining to 8,192) a
+    circle in the axis chart's (x, y) of radius r₁/5000 (r₁ = √(2ψ₀), the boundary's radius there)
+    around the passing guiding centre ``defaults["q0"]``, the surface (24 × 24, refining to 47 × 47) a
+    square of side r₁/2500 around the trapped one, h = ``defaults["h"]``, GLRK1 and GLRK2 with every
+    projection, every form.  Save it, edit it, run it: ``poincare run file.toml``."""
+    from ..boozer import system_from_boozer
+    sy = system_from_boozer(path, modes_tol=modes_tol, grid=grid)
+    r1 = math.sqrt(2 * sy.param_values["psi_edge"])
+    x0, y0, z0, rho0 = sy.defaults["q0"]
+    rt = sy.defaults["trapped"][3]
+    stem = Path(str(path)).name
+    name = name or "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in Path(stem).stem) or "boozer"
+    return f'''# Guiding centres in {stem}, from the system's own defaults (integrators.service.scene.boozer_scene).
+# {'; '.join(sy.defaults['notes'])}
+name = "{name}"
+
+[system]
+boozer = "{stem}"
+modes_tol = {float(modes_tol)!r}
+grid = {int(grid)}
+params = {{ mu = {sy.param_values['mu']:.17g} }}
+
+{_file_scene_sets((x0, y0, z0, rho0), r1 / 5000, (x0, y0, z0, rt), r1 / 2500, sy.defaults['h'], steps, name, output)}'''
+
+
 def equilibrium_scene(path, cocos=None, *, name=None, steps=1000, output=None) -> str:
     """The TOML text of a scene built from a G-EQDSK file's own defaults (docs/equilibria.md), as
     the built-in ``freegs_dn`` is built from its file: the loop (2,048 points, refining to 8,192) a
@@ -1089,9 +1194,6 @@ def equilibrium_scene(path, cocos=None, *, name=None, steps=1000, output=None) -
     ut = sy.defaults["trapped"][3]
     stem = Path(str(path)).name
     name = name or "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in Path(stem).stem) or "equilibrium"
-
-    def vec(*x):
-        return ", ".join(repr(float(c)) for c in x)
     cocos_line = (f"cocos = {cocos}" if cocos is not None else
                   f"# cocos = {sy.defaults['cocos']}          # identified from the file at each run: uncomment to fix it")
     return f'''# Guiding centres in {stem}, from the system's own defaults (integrators.service.scene.equilibrium_scene).
@@ -1103,27 +1205,4 @@ equilibrium = "{stem}"
 {cocos_line}
 params = {{ mu = {p['mu']:.17g} }}
 
-[loop]
-shape = "ellipse"
-points = 2048
-refine_to = 8192
-params = {{ d = 4, center = [{vec(R0, Z0, 0.0, u0)}], radii = [{vec(a / 5000, a / 5000)}], plane = [0, 1] }}
-
-[surface]
-shape = "rectangle"
-n_sigma = 24
-n_tau = 24
-refine_to = 2209
-params = {{ d = 4, center = [{vec(R0, Z0, 0.0, ut)}], size = [{vec(a / 2500, a / 2500)}], plane = [0, 1] }}
-
-[run]
-tableaus = ["GLRK1", "GLRK2"]
-projections = ["none", "standard", "symmetric", "symplectic", "midpoint"]
-h = {sy.defaults['h']!r}
-steps = {int(steps)}
-output_every = {max(1, int(steps) // 100)}
-forms = ["canonical", "noncanonical", "corrected"]
-
-[output]
-path = "{output or name + '.h5'}"
-'''
+{_file_scene_sets((R0, Z0, 0.0, u0), a / 5000, (R0, Z0, 0.0, ut), a / 2500, sy.defaults['h'], steps, name, output)}'''
