@@ -37,6 +37,37 @@ def test_strang_is_symplectic_and_rk2_is_not_with_its_defect_order_on_a_pendulum
     assert abs(r["defect"]["canonical"]["order"] - 3.0) < 0.3
 
 
+def test_a_defect_below_the_floor_at_h_is_looked_for_at_larger_steps():
+    """Issue 72: at h = 2⁻¹⁴ RK2's defect on a pendulum (2.7e-15, 3.9e-16, 1.1e-16 at h, h/2, h/4) is
+    below the complex-step floor 1e-13 although RK2 is not symplectic; the audit goes up (2h, 4h, …)
+    and finds it above the floor at 4h with order 3 (within 0.2).  Störmer–Verlet stays below the floor
+    up to 64h: symplectic.  A map that fails from 2h on leaves "cannot tell at this h"."""
+    def verlet(x, v, h):
+        v = v - 0.5 * h * np.sin(x)
+        x = x + h * v
+        return x, v - 0.5 * h * np.sin(x)
+
+    def rk2(x, v, h):
+        xm, vm = x + 0.5 * h * v, v - 0.5 * h * np.sin(x)
+        return x + h * vm, v - h * np.sin(xm)
+
+    def fragile(x, v, h):
+        return (x * np.nan, v * np.nan) if h > 1e-4 else rk2(x, v, h)
+
+    h = 2.0 ** -14
+    rep = audit_map({"verlet": verlet, "rk2": rk2, "fragile": fragile}, (np.array([0.5]), np.array([0.1])), h,
+                    steps=10, loop_points=64)
+    d = {c["name"]: c["defect"]["canonical"] for c in rep["candidates"]}
+    assert max(d["rk2"]["defect"]) < 1e-13                        # below the floor at h, h/2, h/4 …
+    assert d["rk2"]["verdict"] == "not symplectic" and d["rk2"]["below_floor_at_h"]
+    assert d["rk2"]["above_from"] == 4 * h and abs(d["rk2"]["order"] - 3) < 0.2
+    assert d["verlet"]["verdict"] == "symplectic" and d["verlet"]["upward"]["h"][-1] == 64 * h
+    assert max(d["verlet"]["upward"]["defect"]) < 1e-13
+    assert d["fragile"]["verdict"] == "cannot tell at this h" and "fails at" in d["fragile"]["reason"]
+    from integrators.audit import text_report
+    assert "at 0.000244141 it is 1.7e-13, and it grows as h^" in text_report(rep)
+
+
 def test_the_probe_defect_tracks_the_dense_one():
     """On 16 pendula (32 dimensions, where both run): the probe estimate of RK2's defect is within a
     factor 4 of the dense one at every h and never above it by more than 2x; Strang's both stay at

@@ -106,6 +106,8 @@ def text_report(report) -> str:
             vals = " ".join(f"{_fmt(v):>8s}" for v in r["defect"]) if r["defect"] else ""
             order = f"order {r['order']:.2f}" if r["order"] is not None else ""
             lines.append(f"    {form:13s} {vals:45s} {order:11s} {r['verdict']}")
+            if r.get("reason"):
+                lines.append(f"    {'':13s} ({r['reason']})")
     return "\n".join(lines)
 
 
