@@ -149,7 +149,7 @@ def circular_system():
 @pytest.mark.slow
 def test_system_field_is_the_fourier_sum(circular_system):
     """The compiled |B| (quintic splines on a 64² grid) against the Fourier sum of the same modes at
-    300 points with s < 0.98: within 1e-5 relative (measured 4.5e-6 with 12 modes at 1e-6; here 7)."""
+    300 points with s < 0.98: within 1e-5 relative (measured 3.3e-6, 7 modes)."""
     sy, bz = circular_system, circular_system.boozer
     rng = np.random.default_rng(3)
     s, th, ze = rng.uniform(0, 0.98, 300), rng.uniform(0, 2 * np.pi, 300), rng.uniform(0, 2 * np.pi, 300)
@@ -166,10 +166,10 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
     centres started on a circle of radius 0.02 r₁ about the axis (their orbits come to 0.0033 r₁ of
     it), one started on the axis itself, and the default passing and trapped ones; 4,000 steps of
     the default h.  No point breaks down; P_ζ is kept to round-off by the axis family (measured ≤
-    1.4e-14 relative) and by every orbit under the standard projection, which keeps momentum maps
-    exactly (the symmetric projection does not: the passing orbit's 2.0e-12 with GLRK2, as on the
-    Solov'ev system in test_systems.py); the axis family's energy too (measured ≤ 5.7e-14; the passing
-    orbit's energy error is the method's truncation, 1.1e-9 for GLRK2)."""
+    1.9e-14 relative) and by every orbit under the standard projection (1.2e-14), which keeps momentum
+    maps exactly (the symmetric projection does not: 9.5e-13 with GLRK2, 8.5e-13 with GLRK4 for the
+    default orbits, as on the Solov'ev system in test_systems.py); the axis family's energy too
+    (measured ≤ 5.4e-14; the passing orbit's energy error is the method's truncation, 1.1e-9 for GLRK2)."""
     sy, bz = circular_system, circular_system.boozer
     d = sy.defaults
     r1 = np.sqrt(2 * bz.psi0)
@@ -193,7 +193,7 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
 def test_li383_default_orbits_run():
     """li383 (nfp 3, 114 modes of 1,040 at 1e-4, 8 toroidal harmonics): the default passing and
     trapped guiding centres, 2,000 steps of GLRK2-symmetric at the default h, stay in the plasma with
-    a bounded energy error (measured 1.6e-7 passing, 1e-11 trapped)."""
+    a bounded energy error (measured 1.5e-7 passing, 1.3e-11 trapped)."""
     sy = system_from_boozer(LI383)
     d = sy.defaults
     assert d["harmonics"] == (0, 3, 6, 9, 12, 15, 18, 21)
