@@ -1,4 +1,4 @@
-"""Guiding centres in Boozer coordinates, read from ``boozmn`` files as booz_xform writes them (issue 71).
+"""Guiding centres in Boozer coordinates, read from ``boozmn`` files as booz_xform writes them.
 
 :func:`read_boozmn` reads the NetCDF 3 file (``scipy.io.netcdf_file``: no netCDF4 dependency) into a
 :class:`Boozer` record; :func:`system_from_boozer` turns it into a

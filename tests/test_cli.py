@@ -117,7 +117,7 @@ def test_sigterm_under_mpiexec_stops_every_rank(tmp_path):
     assert proc.returncode == 143
     ours = [line for line in err.splitlines() if line.startswith("poincare:")]
     assert len(ours) == 1 and "SIGTERM" in ours[0] and "--resume" in ours[0] and "Traceback" not in err
-    with h5py.File(out) as f:
+    with h5py.File(out, "r", locking=False) as f:      # a rank's lock can outlive it by a moment under load
         assert f["runs/GLRK2-symmetric/t"].shape[0] >= 5
 
 
