@@ -374,9 +374,11 @@ def _map_audit(args):
     elif ex is None:
         raise ValueError("--map of your own needs --point: a .npz file with arrays x0 and v0 (with --theta: q0), "
                          "or file.py:function returning (x0, v0) (with --theta: q0)")
-    h = args.h if args.h is not None else (None if ex is None else ex["h"])
+    h = (args.h[0] if len(args.h) == 1 else list(args.h)) if args.h is not None else (None if ex is None else ex["h"])
     if h is None:
         raise ValueError("--map of your own needs --h, the step size")
+    if args.every_coordinate and args.plane is not None:
+        raise ValueError("give --plane or --every-coordinate, not both")
     radius = args.radius if args.radius is not None else (0.1 if ex is None else ex["radius"])
     kw = dict(steps=args.steps if args.steps is not None else 100, loop_points=args.loop_points,
               radius=radius, surface=args.surface, defect_points=args.points,
@@ -385,7 +387,8 @@ def _map_audit(args):
         kw["output_every"] = args.output_every
     # every size judged before an example or a set is built (an example's point alone is 16 bytes × k)
     n = 2 * max(examples.defaults(s, args.k)["k"] for s in shipped) if args.point is None else (np.size(point) if theta is not None else 2 * np.size(point[0]))
-    check_arguments(n, h, noncanonical=theta is not None, names=MAP_OPTIONS, **kw)
+    for hk in (h if isinstance(h, list) else [h]):
+        check_arguments(n, hk, noncanonical=theta is not None, names=MAP_OPTIONS, **kw)
     maps, info = {}, None
     for spec in args.map:
         if spec in examples.EXAMPLES:
@@ -399,7 +402,7 @@ def _map_audit(args):
     period = args.period if args.period is not None else (None if info is None else [info["period"]])
     if period is not None and len(period) == 1:
         period = period[0]
-    kw.update(plane=args.plane, period=period)
+    kw.update(plane="every" if args.every_coordinate else args.plane, period=period)
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     energy = None if args.energy is None else load_callable(args.energy, "--energy", confined=False)
     return audit_map(maps, point, h, progress=say, theta=theta, energy=energy, **kw)
@@ -483,7 +486,8 @@ def _audit_outputs(report, args) -> int:
     return 0
 
 
-_EXAMPLE_NAMES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2")   # audit.examples.EXAMPLES
+_EXAMPLE_NAMES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2", "pic2-strang",
+                  "pic2-rk2")   # audit.examples.EXAMPLES
 
 
 def _check_writable(path, option, file):
@@ -587,7 +591,8 @@ def build_parser():
                                     "arrays x0 and v0, or file.py:function returning them (examples: their own)")
     mp.add_argument("--k", type=int, default=None,
                     help="size of a shipped example: pendula (default 1024) or particles (default 10000)")
-    mp.add_argument("--h", type=float, default=None, help="step size (examples: theirs)")
+    mp.add_argument("--h", type=float, nargs="+", default=None,
+                    help="step size (examples: theirs); several: a sweep, one report over all of them")
     mp.add_argument("--period", type=float, nargs="+", default=None,
                     help="period of the positions: one number for all, or one per coordinate (0: not periodic)")
     mp.add_argument("--loop-points", type=int, default=1024, help="points of the loop (default 1024)")
@@ -595,7 +600,9 @@ def build_parser():
                     help="radius of the loop in phase space (default 0.1; the examples' own: pendula 0.01)")
     mp.add_argument("--plane", type=int, nargs=2, default=None, metavar=("I", "J"),
                     help="phase-space coordinates (x_0 … x_{k-1}, v_0 … v_{k-1}) the loop turns in "
-                         "(default: all x against all v)")
+                         "(default: all x against all v, radius/√k in each)")
+    mp.add_argument("--every-coordinate", action="store_true",
+                    help="the loop's radius in every coordinate: x_i = x0_i + r cos 2πτ, v_i = v0_i + r sin 2πτ")
     mp.add_argument("--surface", type=int, nargs=2, default=None, metavar=("NS", "NT"),
                     help="also a surface of NS × NT Chebyshev points in the same plane (I₂)")
     mp.add_argument("--probes", type=int, default=8, help="probe pairs of the matrix-free defect (default 8)")

@@ -18,6 +18,17 @@ def _pendula(k, method):
     return step, (rng.uniform(0, 2 * np.pi, k), 0.5 * rng.standard_normal(k)), info
 
 
+def _verlet(x, v, h):
+    v = v - 0.5 * h * np.sin(x)
+    x = x + h * v
+    return x, v - 0.5 * h * np.sin(x)
+
+
+def _rk2(x, v, h):
+    xm, vm = x + 0.5 * h * v, v - 0.5 * h * np.sin(x)
+    return x + h * vm, v - h * np.sin(xm)
+
+
 def test_strang_is_symplectic_and_rk2_is_not_with_its_defect_order_on_a_pendulum_array():
     """k = 48 pendula (96 dimensions: the matrix-free defect): Strang keeps I₁ to round-off and its
     defect at the complex-step floor at h, h/2, h/4; RK2 drifts, and its defect falls as h³ (a local
@@ -42,20 +53,11 @@ def test_a_defect_below_the_floor_at_h_is_looked_for_at_larger_steps():
     below the complex-step floor 1e-13 although RK2 is not symplectic; the audit goes up (2h, 4h, …)
     and finds it above the floor at 4h with order 3 (within 0.2).  Störmer–Verlet stays below the floor
     up to 64h: symplectic.  A map that fails from 2h on leaves "cannot tell at this h"."""
-    def verlet(x, v, h):
-        v = v - 0.5 * h * np.sin(x)
-        x = x + h * v
-        return x, v - 0.5 * h * np.sin(x)
-
-    def rk2(x, v, h):
-        xm, vm = x + 0.5 * h * v, v - 0.5 * h * np.sin(x)
-        return x + h * vm, v - h * np.sin(xm)
-
     def fragile(x, v, h):
-        return (x * np.nan, v * np.nan) if h > 1e-4 else rk2(x, v, h)
+        return (x * np.nan, v * np.nan) if h > 1e-4 else _rk2(x, v, h)
 
     h = 2.0 ** -14
-    rep = audit_map({"verlet": verlet, "rk2": rk2, "fragile": fragile}, (np.array([0.5]), np.array([0.1])), h,
+    rep = audit_map({"verlet": _verlet, "rk2": _rk2, "fragile": fragile}, (np.array([0.5]), np.array([0.1])), h,
                     steps=10, loop_points=64)
     d = {c["name"]: c["defect"]["canonical"] for c in rep["candidates"]}
     assert max(d["rk2"]["defect"]) < 1e-13                        # below the floor at h, h/2, h/4 …
@@ -104,25 +106,35 @@ def test_central_differences_where_the_map_is_real_only():
     assert used_cs == "complex step" and abs(d_fd - d_cs) < 1e-3 * d_cs
 
 
-@pytest.mark.parametrize("degree", [1, 3])
+@pytest.mark.parametrize("degree", [1, 2, 3])
 def test_pic_strang_keeps_the_canonical_invariant_and_rk2_does_not(degree):
     """1-D electrostatic PIC, 2,000 particles (4,000 dimensions), Landau start: the splitting with the
     field energy's exact gradient is symplectic (defect below 1e-14); RK2 is not, defect order within
     0.5 of 3 with cubic B-splines (above 1.5 with linear ones, whose map is only piecewise smooth:
     measured 2.2).  The loop (across the periodic domain's cut, unwrapped by its period) keeps I₁ to
-    round-off with cubic B-splines; with linear ones the force is only continuous, the loop's image
-    develops kinks, and the monitor says under-resolved rather than report a drift."""
+    round-off with cubic B-splines.  With linear ones the force (the hat function differentiated) is
+    piecewise constant: the kicks jump where a particle crosses a grid point, the loop's image jumps in
+    the particles' velocities, and the audit says ``discontinuous`` (its point-wise defect is at the
+    floor) while the monitor says under-resolved rather than report a drift.  Quadratic ones give a
+    continuous force with kinks: symplectic, no jumps, RK2's order within 0.5 of 3."""
     out = {}
     for method in ("strang", "rk2"):
         step, info = examples.pic(particles=2000, cells=32, degree=degree, method=method)
         out[method] = audit_map(step, info["landau"](), 0.1, steps=20, loop_points=128, period=info["period"],
                                 defect_points=2)["candidates"][0]
     s, r = out["strang"], out["rk2"]
-    assert s["defect"]["canonical"]["verdict"] == "symplectic" and max(s["defect"]["canonical"]["defect"]) < 1e-14
-    assert s["drift"]["I1/canonical"]["verdict"] == ("round-off" if degree == 3 else "under-resolved")
+    assert s["defect"]["canonical"]["verdict"] == ("discontinuous" if degree == 1 else "symplectic")
+    assert max(s["defect"]["canonical"]["defect"]) < 1e-14
+    jumps = s["discontinuity"]
+    if degree > 1:
+        assert jumps["verdict"] == "continuous" and not jumps["jumps"]
+    else:
+        assert jumps["verdict"] == "jumps" and all(j["coordinate"] >= 2000 for j in jumps["jumps"])   # velocities
+    if degree != 2:
+        assert s["drift"]["I1/canonical"]["verdict"] == ("round-off" if degree == 3 else "under-resolved")
     assert r["defect"]["canonical"]["verdict"] == "not symplectic"
     order = r["defect"]["canonical"]["order"]
-    assert abs(order - 3.0) < 0.5 if degree == 3 else 1.5 < order < 3.5
+    assert abs(order - 3.0) < 0.5 if degree > 1 else 1.5 < order < 3.5
 
 
 def test_a_wrapped_loop_without_its_period_is_under_resolved_not_a_verdict():
@@ -298,6 +310,7 @@ def test_the_energy_error_of_a_map_audit():
     rep = audit_map(step, point, 0.1, steps=30, output_every=10, loop_points=64, radius=0.05,
                     period=info["period"], energy=info["energy"])
     e = rep["candidates"][0]["energy_error"]
+    assert "energy_growth_law" in rep["candidates"][0]
     z = _loop(np.concatenate(point), _plane(16, None, None), 0.05, 64)
     H0 = info["energy"](z[:, :8], z[:, 8:])
     for n in range(30):
@@ -306,3 +319,112 @@ def test_the_energy_error_of_a_map_audit():
     want = np.max(np.abs(info["energy"](z[:, :8], z[:, 8:]) - H0) / np.abs(H0))
     assert len(e) == 4 and e[0] == 0 and abs(e[-1] - want) <= 1e-15 * want and 0 < want < 1e-2
     assert "energy" in text_report(rep)
+
+
+def test_a_sweep_of_step_sizes_in_one_call_with_one_i0(monkeypatch):
+    """Issue 72: audit_map over twelve step sizes (2⁻¹ … 2⁻¹⁰, 2⁻¹⁴, 2⁻¹⁶) in one-step mode computes
+    I₁ of the loop once at t = 0 and once per map and h after (1 + 2 × 12 calls); Verlet is
+    symplectic at every h with its one-step error at round-off; RK2 is not symplectic at every h,
+    including 2⁻¹⁶ where its defect (C·h³) is below the floor: said so, from the larger steps; its
+    defect order within 0.3 of 3, and its one-step error above 1e-11 from 2⁻¹ to 2⁻⁸."""
+    from integrators.audit import maps, text_report
+    calls = []
+    real = maps._invariants
+    monkeypatch.setattr(maps, "_invariants", lambda *a, **k: calls.append(1) or real(*a, **k))
+    hs = [2.0 ** -j for j in list(range(1, 11)) + [14, 16]]
+    rep = audit_map({"verlet": _verlet, "rk2": _rk2}, (np.array([0.5]), np.array([0.1])), hs, steps=1, loop_points=128)
+    assert len(calls) == 1 + 2 * len(hs)
+    c = {x["name"]: x for x in rep["candidates"]}
+    assert [v["verdict"] for v in c["verlet"]["verdicts"]] == ["symplectic"] * len(hs)
+    assert max(c["verlet"]["one_step"]["error"]) < 1e-14
+    assert [v["verdict"] for v in c["rk2"]["verdicts"]] == ["not symplectic"] * len(hs)
+    d = c["rk2"]["defect"]["canonical"]
+    assert d["defect"][d["h"].index(2.0 ** -16)] < 1e-13
+    assert "below the floor at this h" in c["rk2"]["verdicts"][-1]["reason"]
+    assert abs(d["order"] - 3) < 0.3
+    assert min(c["rk2"]["one_step"]["error"][:8]) > 1e-11
+    assert rep["sweep"]["mode"] == "one step" and "over 12 step sizes" in text_report(rep)
+    assert "one-step I₁ error order" in text_report(rep)
+
+
+def test_maps_with_jumps_are_discontinuous_with_i1_over_their_pieces():
+    """Issue 72: a kick v → v − h·sign(x) (the exact flow of |x|) and the Strang splitting of
+    H = v²/2 + |x| have defects at 0 where they are smooth, but the loop through x = 0 has an image that
+    jumps by h (the kick) at the two crossings, located to 2⁻³⁰ of the loop's step: ``discontinuous``
+    at every h of the sweep.  The kick's generating function −h|x| is continuous, so I₁ over the
+    continuous pieces is kept to 1e-14; Strang's (kick, drift, kick) composes the drift's with the
+    jump and moves it (above 1e-3 at h = 0.1).  A kick by −h·|x| (a kink, no jump) and Verlet are
+    continuous and symplectic."""
+    def kick(x, v, h):
+        return x, v - h * np.sign(np.real(x))
+
+    def absq(x, v, h):
+        v = v - 0.5 * h * np.sign(np.real(x))
+        x = x + h * v
+        return x, v - 0.5 * h * np.sign(np.real(x))
+
+    def kink(x, v, h):
+        return x, v - h * x * np.sign(np.real(x))
+
+    rep = audit_map({"kick": kick, "absq": absq, "kink": kink, "verlet": _verlet},
+                    (np.array([0.05]), np.array([0.3])), [0.1, 0.05, 0.025], steps=1, loop_points=256)
+    c = {x["name"]: x for x in rep["candidates"]}
+    for name in ("kick", "absq"):
+        assert [v["verdict"] for v in c[name]["verdicts"]] == ["discontinuous"] * 3, name
+    for run in c["kick"]["runs"]:
+        j = run["discontinuity"]
+        assert len(j["jumps"]) == 2 and all(abs(x["size"] - 2 * run["h"]) < 1e-9 for x in j["jumps"])
+        assert all(x["interval"][1] - x["interval"][0] < 2.0 ** -30 / 256 * 1.01 for x in j["jumps"])
+        assert j["piecewise"]["settled"] and j["piecewise"]["change"] < 1e-14
+        assert {round(x["tau"], 6) for x in j["jumps"]} == {round(t, 6) for t in (1 / 3, 2 / 3)}   # x = 0.05 + 0.1 cos 2πτ
+    pw = c["absq"]["runs"][0]["discontinuity"]["piecewise"]
+    assert pw["settled"] and pw["change"] > 1e-3
+    for name in ("kink", "verlet"):
+        assert [v["verdict"] for v in c[name]["verdicts"]] == ["symplectic"] * 3, name
+        assert all(r["discontinuity"]["verdict"] == "continuous" for r in c[name]["runs"])
+
+
+def test_the_loop_in_every_coordinate_and_blocked_rows_keep_the_bits(monkeypatch):
+    """plane="every": radius r in every coordinate (Barham & Burby's loop), so I₁ = −πr²k (the loop
+    turns clockwise in each (x_i, v_i)); the sets advanced in blocks of rows give the same bits as in
+    one call."""
+    from integrators.audit import maps
+    step, point, info = _pendula(8, "strang")
+    kw = dict(steps=6, output_every=2, loop_points=64, radius=0.05, period=info["period"], plane="every")
+    rep = audit_map(step, point, 0.1, **kw)
+    d = rep["candidates"][0]["drift"]["I1/canonical"]
+    assert abs(d["value_at_start"] + np.pi * 0.05 ** 2 * 8) < 1e-14 * np.pi * 0.05 ** 2 * 8
+    assert rep["sets"]["loop"]["plane"] == "every"
+    monkeypatch.setattr(maps, "BLOCK_BYTES", 8 * 16 * 5)          # 5 rows a block
+    again = audit_map(step, point, 0.1, **kw)
+    assert again["candidates"][0]["errors"] == rep["candidates"][0]["errors"]
+    with pytest.raises(ValueError, match="two coordinates"):
+        audit_map(step, point, 0.1, plane="all", **{k: v for k, v in kw.items() if k != "plane"})
+
+
+def test_poincare_audit_map_over_several_step_sizes(tmp_path):
+    """`poincare audit --map … --h H1 H2 H3 --steps 1`: one report, a line per map and h, a sweep plot."""
+    r = poincare("audit", "--map", "pendula-strang", "pendula-rk2", "--k", "4", "--h", "0.2", "0.1", "0.05",
+                 "--steps", "1", "--loop-points", "64", "--every-coordinate", "-q", "--plots", str(tmp_path),
+                 "--json", str(tmp_path / "a.json"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((tmp_path / "a.json").read_text())
+    verdicts = {c["name"]: [v["verdict"] for v in c["verdicts"]] for c in rep["candidates"]}
+    assert verdicts == {"pendula-strang": ["symplectic"] * 3, "pendula-rk2": ["not symplectic"] * 3}
+    assert "over 3 step sizes" in r.stdout and (tmp_path / "audit_sweep.png").exists()
+
+
+def test_central_differences_and_the_complex_step_check_see_through_a_wrap():
+    """A map that wraps its positions into [0, 2π) (the shipped pendula) at points 1e-4 below the wrap:
+    central differences (step ~0.006) straddle it.  Given the period, the outputs are differenced modulo
+    it and the Strang defect is below the central-difference floor 1e-10; without it a difference of
+    2π reads as a defect above 1e-3."""
+    step, info = examples.pendulum_array(4, method="strang")
+    k = 4
+    z = np.concatenate([np.full((2, k), 2 * np.pi - 1e-4), np.full((2, k), 0.02)], axis=1)
+    z[1, :k] -= 1e-5
+    P = np.r_[np.full(k, 2 * np.pi), np.zeros(k)]
+    d, used, _ = map_defect(step, z, 0.1, method="central differences", period=P)
+    assert used == "central differences" and d < 1e-10
+    d_raw, _, _ = map_defect(step, z, 0.1, method="central differences")
+    assert d_raw > 1e-3

@@ -136,8 +136,9 @@ def _call(step, x, v, h):
 def _plane(n, plane, directions, canonical=True):
     """Two directions (2, n) spanning the sets' plane: given, or coordinates ``plane`` = (i, j) of the
     phase space (x_0 … x_{k−1}, v_0 … v_{k−1}), or by default every x together against every v
-    ((1, …, 1, 0, …)/√k and (0, …, 0, 1, …)/√k: ω of the pair is 1); a noncanonical map's default
-    is the coordinates (0, 1)."""
+    ((1, …, 1, 0, …)/√k and (0, …, 0, 1, …)/√k: ω of the pair is 1), or with ``plane="every"`` the
+    same unscaled (the loop's radius in every coordinate, as Barham & Burby's study takes it: ω of
+    the pair is k); a noncanonical map's default is the coordinates (0, 1)."""
     k = n // 2
     if plane is None and directions is None and not canonical:
         plane = (0, 1)
@@ -149,9 +150,14 @@ def _plane(n, plane, directions, canonical=True):
             raise ValueError("directions must be two independent vectors")
         return D
     D = np.zeros((2, n))
-    if plane is None:
-        D[0, :k] = D[1, k:] = 1.0 / math.sqrt(k)
+    if plane is None or (isinstance(plane, str) and plane == "every"):
+        if not canonical:
+            raise ValueError('plane="every" turns every x against its own v: a canonical map\'s loop (a noncanonical '
+                             "map's plane is two coordinates, or directions=)")
+        D[0, :k] = D[1, k:] = 1.0 if plane == "every" else 1.0 / math.sqrt(k)
         return D
+    if isinstance(plane, str):
+        raise ValueError(f'plane must be two coordinates (i, j) or "every", got {plane!r}')
     i, j = (int(a) for a in plane)
     if not (0 <= i < n and 0 <= j < n and i != j):
         raise ValueError(f"plane must name two different phase-space coordinates in 0 … {n - 1}, got {plane}")
@@ -166,24 +172,40 @@ def _omega(a, b, k):
             np.sum(np.abs(av * bx), axis=-1) + np.sum(np.abs(ax * bv), axis=-1))
 
 
-def jvp(step, z, U, h, method="auto"):
+def jvp(step, z, U, h, method="auto", period=None):
     """DΦ(z)·U for points z (m, 2k) and directions U (m, r, 2k) of a canonical map: (m, r, 2k) and
-    the method used (:func:`row_jvp`)."""
+    the method used (:func:`row_jvp`; ``period``: the phase space's periods, (2k,) or None)."""
     k = z.shape[1] // 2
 
     def rows(Z):
         x1, v1 = _call(step, Z[:, :k], Z[:, k:], h)
         return np.concatenate([x1, v1], axis=1)
-    return row_jvp(rows, z, U, method)
+    return row_jvp(rows, z, U, method, period)
 
 
-def row_jvp(f, z, U, method="auto"):
+def _unwrapped(d, period):
+    """Differences of a map's outputs with whole periods of its periodic outputs taken out: a map
+    that wraps its positions into [0, P) may wrap two nearby evaluations differently."""
+    if period is None:
+        return d
+    P = np.asarray(period, dtype=float)
+    per = P > 0
+    if not per.any():
+        return d
+    d = np.array(d, dtype=float)
+    d[..., per] -= P[per] * np.round(d[..., per] / P[per])
+    return d
+
+
+def row_jvp(f, z, U, method="auto", period=None):
     """Df(z)·U of a batched function f: (M, n) -> (M, n') on rows, at points z (m, n) along
     directions U (m, r, n): (m, r, n') and the method used.
 
     Complex step (one call on m·r rows) when f's complex evaluation reproduces the real one to
-    1e-13, else 8th-order central differences with step 2⁻¹⁰·max(|z|, 1) along each unit direction
-    (eight calls)."""
+    1e-13 of the value and 1e-11 of its derivative's reach (a stretching map amplifies rounding), else 8th-order central differences with step 2⁻¹⁰·max(|z|, 1) along each unit direction
+    (eight calls).  ``period`` (n',) (0: not periodic): outputs that f wraps are compared and
+    differenced modulo their period (a position wrapped into [0, P) by one evaluation and not by
+    its neighbour is not a jump of P)."""
     m, r, n = U.shape
     Z = np.repeat(z[:, None, :], r, axis=1).reshape(m * r, n)
     Uf = U.reshape(m * r, n)
@@ -194,8 +216,14 @@ def row_jvp(f, z, U, method="auto"):
                 F = np.asarray(f(Z + 1j * CS_STEP * Uf))
                 base = np.asarray(f(z))
             ref = np.repeat(base[:, None, :], r, axis=1).reshape(m * r, -1)
+            # the real parts agree to round-off carried through the map: 1e-13 of the value, and 1e-11 of
+            # the derivative's reach |Df·u| |z|/|u| (a stretching map amplifies its inputs' rounding, in
+            # the direction of most stretch up to ~√n times more than along a random u)
+            reach = np.abs(F.imag) / CS_STEP * (np.maximum(np.max(np.abs(Z), axis=1, keepdims=True), 1.0)
+                                                / np.maximum(np.linalg.norm(Uf, axis=1, keepdims=True), 1e-300)) \
+                if np.iscomplexobj(F) and F.shape == ref.shape else 0.0
             usable = np.iscomplexobj(F) and F.shape == ref.shape and \
-                np.all(np.abs(F.real - ref) <= 1e-13 * np.maximum(np.abs(ref), 1.0))
+                np.all(np.abs(_unwrapped(F.real - ref, period)) <= 1e-13 * np.maximum(np.abs(ref), 1.0) + 1e-11 * reach)
         except (TypeError, ValueError):
             usable = False
         if usable:
@@ -206,14 +234,17 @@ def row_jvp(f, z, U, method="auto"):
     norm = np.where(norm > 0, norm, 1.0)
     delta = FD_STEP * np.maximum(np.max(np.abs(Z), axis=1, keepdims=True), 1.0)   # along the unit direction
     D = 0.0
+    with np.errstate(all="ignore"):
+        base = None if period is None else np.asarray(f(Z), dtype=float)
     for kk, w in FD_ORDER8:
         for sgn in (1.0, -1.0):
             with np.errstate(all="ignore"):
-                D = D + sgn * w * np.asarray(f(Z + sgn * kk * delta * Uf / norm), dtype=float)
+                g = np.asarray(f(Z + sgn * kk * delta * Uf / norm), dtype=float)
+                D = D + sgn * w * (g if base is None else _unwrapped(g - base, period))
     return (D / delta * norm).reshape(m, r, -1), "central differences"
 
 
-def map_defect(step, z, h, probes=PROBES, method="auto", seed=0, dense=None, theta=None):
+def map_defect(step, z, h, probes=PROBES, method="auto", seed=0, dense=None, theta=None, period=None):
     """The relative one-step defect of the canonical form at points z (m, 2k): (value, method, kind).
     With ``theta`` (a batched one-form ϑ(q) -> (m, d)) the map is ``step(q, h) -> q`` on (m, d) and
     the form dϑ, evaluated matrix-free at z and at Φ(z) (:func:`noncanonical_defect`).
@@ -221,21 +252,22 @@ def map_defect(step, z, h, probes=PROBES, method="auto", seed=0, dense=None, the
     ``dense`` (default: 2k ≤ DENSE_UP_TO): max |BᵀJB − J| over the size of its terms, B the Jacobian
     from 2k JVPs; else the largest over ``probes`` random pairs (u, w) (normal, from numpy's generator
     of ``seed``) of |ω(Bu, Bw) − ω(u, w)| over the size of the terms of both.  NaN where the map
-    failed (non-finite values)."""
+    failed (non-finite values).  ``period``: the phase space's periods ((2k,), or (d,) with ``theta``;
+    0 where not periodic), which a map's wrapped outputs are differenced modulo."""
     m, n = z.shape
     k = n // 2
     dense = n <= DENSE_UP_TO if dense is None else dense
     if theta is not None:
-        return noncanonical_defect(step, theta, z, h, probes, method, seed, dense)
+        return noncanonical_defect(step, theta, z, h, probes, method, seed, dense, period)
     if dense:
         E = np.broadcast_to(np.eye(n), (m, n, n))
-        DB, used = jvp(step, z, np.ascontiguousarray(E), h, method)          # rows: B e_j
+        DB, used = jvp(step, z, np.ascontiguousarray(E), h, method, period)  # rows: B e_j
         B = np.swapaxes(DB, 1, 2)
         Jc = np.block([[np.zeros((k, k)), -np.eye(k)], [np.eye(k), np.zeros((k, k))]])
         return _pullback(B, Jc, Jc), used, "dense"
     rng = np.random.default_rng(seed)
     U = rng.standard_normal((m, 2 * probes, n)) / math.sqrt(n)
-    BU, used = jvp(step, z, U, h, method)
+    BU, used = jvp(step, z, U, h, method, period)
     u, w, a, b = U[:, 0::2], U[:, 1::2], BU[:, 0::2], BU[:, 1::2]
     o_out, s_out = _omega(a, b, k)
     o_in, s_in = _omega(u, w, k)
@@ -285,7 +317,7 @@ def two_form(theta, z, method="auto"):
     return (np.swapaxes(J, 1, 2) - J).reshape(shape + (d, d))
 
 
-def noncanonical_defect(step, theta, z, h, probes=PROBES, method="auto", seed=0, dense=None):
+def noncanonical_defect(step, theta, z, h, probes=PROBES, method="auto", seed=0, dense=None, period=None):
     """The one-step defect of dϑ under ``step(q, h) -> q`` at points z (m, d): (value, method, kind).
 
     Matrix-free: over random probe pairs (u, w), |dϑ_{Φ(z)}(DΦu, DΦw) − dϑ_z(u, w)| over the size of
@@ -298,12 +330,12 @@ def noncanonical_defect(step, theta, z, h, probes=PROBES, method="auto", seed=0,
     with np.errstate(all="ignore"):
         z1 = np.asarray(f(z), dtype=float)
     if dense:
-        DB, used = row_jvp(f, z, np.ascontiguousarray(np.broadcast_to(np.eye(n), (m, n, n))), method)
+        DB, used = row_jvp(f, z, np.ascontiguousarray(np.broadcast_to(np.eye(n), (m, n, n))), method, period)
         B = np.swapaxes(DB, 1, 2)
         return _pullback(B, two_form(theta, z, method), two_form(theta, z1, method)), used, "dense"
     rng = np.random.default_rng(seed)
     U = rng.standard_normal((m, 2 * probes, n)) / math.sqrt(n)
-    BU, used = row_jvp(f, z, U, method)
+    BU, used = row_jvp(f, z, U, method, period)
     JU, _ = row_jvp(th, z, U, method)
     JBU, _ = row_jvp(th, z1, BU, method)
 
@@ -352,22 +384,32 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
 
     ``energy``: a batched energy(x, v) -> (n,) (with ``theta``: energy(q)); the report's
     ``energy_error`` is then max over the sets' points of |H − H(0)|/|H(0)| (|H − H(0)| where H(0) = 0)
-    at every output.
+    at every output, and ``energy_growth_law`` its growth law.
 
     step : ``step(x, v, h) -> (x, v)`` on (n, k) arrays, each row on its own (or a dict {name: step}:
         several maps audited on the same sets, in one report)
     point : (x0, v0), 1-D arrays of length k
-    h, steps, output_every : step size, steps of the drift run, outputs every (default steps/50)
+    h : the step size, or a list of step sizes: a sweep (:func:`_sweep`, one report for all of them,
+        the sets and their I(0) built once; with ``steps=1`` the one-step mode, whose verdict is
+        |I(h) − I(0)|/|I(0)| against h)
+    steps, output_every : steps of the drift run, outputs every (default steps/50)
     loop_points, radius, plane, directions : the loop z0 + radius(cos 2πτ d₁ + sin 2πτ d₂); the
         directions d₁, d₂ given (two vectors of length 2k), or the coordinates ``plane`` = (i, j) of
-        (x_0 … x_{k−1}, v_0 … v_{k−1}), or by default all x against all v (see :func:`_plane`)
+        (x_0 … x_{k−1}, v_0 … v_{k−1}), or ``plane="every"`` (radius ``radius`` in every coordinate:
+        x_i = x0_i + r cos 2πτ, v_i = v0_i + r sin 2πτ), or by default all x against all v scaled by
+        1/√k (see :func:`_plane`).  The loop turns clockwise in each (x_i, v_i) plane, so I₁ = ∮ v·dx
+        is −πr² a coordinate pair
     surface : (n_σ, n_τ) for a square of half-side ``radius`` in the same plane at Chebyshev points
         (I₂), or None
     period : the positions' periods (a number, or one per x coordinate; None or 0: not periodic)
     defect_points, levels, probes, method, seed : the defect at ``defect_points`` points of the loop
-        for h·2⁻ˡ, l < ``levels``, by :func:`map_defect`
+        for h·2⁻ˡ, l < ``levels`` (a sweep: at its own step sizes), by :func:`map_defect`
     Returns the JSON-able report of :func:`integrators.audit.audit` (``text_report``,
     ``plot_report`` read it), with the loop's description under ``"sets"``.
+
+    The image of the loop after the first step is searched for jumps (:mod:`integrators.audit.jumps`):
+    a map whose image jumps is ``discontinuous`` where its point-wise defect would say symplectic,
+    with I₁ over the continuous pieces before and after the step (``"discontinuity"``).
 
     Every argument and size is checked first (:func:`check_arguments`; the plane must carry area of
     the form, a period must be one the loop's steps can tell from a wrap): a one-line ValueError,
@@ -383,21 +425,29 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
     z0 = _start(point, theta)
     n = z0.size
     k = n // 2
-    h, steps, every, loop_points, surface, defect_points, levels, probes = check_arguments(
-        n, h, steps=steps, output_every=output_every, loop_points=loop_points, radius=radius, surface=surface,
-        defect_points=defect_points, levels=levels, probes=probes, method=method, noncanonical=theta is not None)
+    sweep = isinstance(h, (list, tuple)) or (isinstance(h, np.ndarray) and h.ndim == 1)
+    if sweep and len(h) == 0:
+        raise ValueError("h must be a step size or a non-empty list of them, got an empty list")
+    hs = []
+    for hk in (h if sweep else [h]):
+        hk, steps, every, loop_points, surface, defect_points, levels, probes = check_arguments(
+            n, hk, steps=steps, output_every=output_every, loop_points=loop_points, radius=radius, surface=surface,
+            defect_points=defect_points, levels=levels, probes=probes, method=method, noncanonical=theta is not None)
+        hs.append(hk)
+    if sweep and len(set(hs)) != len(hs):
+        raise ValueError(f"h lists a step size twice: {hs}")
     from invariants.forms import _periods
     P = _periods(period, n if theta is not None else k)
     if theta is not None and surface is not None and n > 2 * DENSE_UP_TO:
         raise ValueError(f"a surface of a noncanonical map takes Ω = Dϑᵀ − Dϑ, {n} × {n} a point: up to "
                          f"d = {2 * DENSE_UP_TO}; audit the loop (surface=None)")
-    sets, shapes = _sets(z0, k, _plane(n, plane, directions, canonical=theta is None), radius, loop_points, surface,
-                         P, theta, method)
+    D = _plane(n, plane, directions, canonical=theta is None)
+    sets, shapes = _sets(z0, k, D, radius, loop_points, surface, P, theta, method)
     loop = sets["I1"]
     form = "canonical" if theta is None else "noncanonical"
-    hs = [h * 2.0 ** -l for l in range(levels)]
     sel = np.linspace(0, loop.shape[0], defect_points, endpoint=False).astype(int)
-    report = {"scene": name if not isinstance(step, dict) else "maps", "h": h, "steps": steps, "T": h * steps,
+    report = {"scene": name if not isinstance(step, dict) else "maps", "h": hs if sweep else hs[0], "steps": steps,
+              "T": [hk * steps for hk in hs] if sweep else hs[0] * steps,
               "system": f"canonical map, k = {k} ({2 * k}-dimensional phase space)" if theta is None else
               f"noncanonical map with a one-form of code, d = {n}",
               "thresholds": {"roundoff": ROUNDOFF, "resolved": RESOLVED, "defect_floor": DEFECT_FLOOR},
@@ -405,18 +455,164 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
               "sets": _sets_description(loop_points, radius, plane, directions, surface, P, theta is None),
               "discrimination": None,       # the canonical form is not constant along a general map
               "candidates": []}
+    invariant = (lambda part, key: _invariants(part, k, P, key, theta))
+    start = _start_values(sets, shapes, invariant)          # I(0) of every set, once for every map and h
+    Pz = None if P is None else (P if theta is not None else np.concatenate([P, np.zeros(k)]))
+    ctx = dict(k=k, z0=z0, D=D, radius=float(radius), Pz=Pz, theta=theta, scale=abs(start["I1"].value))
     for nm, s in maps.items():
-        entry = {"name": nm, "role": "candidate", "kind": f"{form} map", "breakdown_step": None, "drift": {},
-                 "t": [], "errors": {}, "defect": {}, "jacobian": None}
-        advance = _advance(s, k, h) if theta is None else _rows(s, h)
-        with np.errstate(all="ignore"):      # a map's overflow is its breakdown or its NaN defect: reported, not warned
-            _drift(entry, advance, sets, shapes, lambda part, key: _invariants(part, k, P, key, theta), form,
-                   steps, h, every, progress, _energy(energy, k, theta))
-            entry["defect"], entry["jacobian"] = _defect_study(
-                s, loop[sel], hs, probes, method, seed,
-                None if progress is None else (lambda hk, nm=nm: progress(f"{nm}: one-step defect at h = {hk:g}")), theta)
-        report["candidates"].append(entry)
+        say = None if progress is None else (lambda msg, nm=nm: progress(f"{nm}: {msg}"))
+        runs = []
+        for hk in hs:
+            entry = {"name": nm, "role": "candidate", "kind": f"{form} map", "h": hk, "breakdown_step": None,
+                     "drift": {}, "t": [], "errors": {}, "defect": {}, "jacobian": None, "discontinuity": None}
+            advance = _mapped(s, hk, k, theta)
+            with np.errstate(all="ignore"):  # a map's overflow is its breakdown or its NaN defect: reported, not warned
+                _drift(entry, _blocked(advance), sets, shapes, invariant, form, steps, hk, every,
+                       None if say is None else (lambda msg, hk=hk: say(f"h = {hk:g}: {msg}")),
+                       _energy(energy, k, theta), start=start,
+                       first=lambda z1, entry=entry, advance=advance: _look_for_jumps(entry, advance, z1[:loop.shape[0]], ctx))
+            runs.append(entry)
+        levels_h = sorted(hs, key=abs, reverse=True) if sweep else [hs[0] * 2.0 ** -l for l in range(levels)]
+        with np.errstate(all="ignore"):
+            defect, jacobian = _defect_study(
+                s, loop[sel], levels_h, probes, method, seed,
+                None if say is None else (lambda hk: say(f"one-step defect at h = {hk:g}")), theta, Pz)
+        if not sweep:
+            entry = runs[0]
+            entry["defect"], entry["jacobian"] = defect, jacobian
+            _judge_jumps(entry["defect"][form], entry["discontinuity"])
+            report["candidates"].append(entry)
+        else:
+            report["candidates"].append(_sweep_entry(nm, form, hs, runs, defect, jacobian, steps))
+    if sweep:
+        report["sweep"] = {"h": hs, "mode": "one step" if steps == 1 else f"{steps} steps"}
     return report
+
+
+def _mapped(step, h, k, theta):
+    """The map at step size h as a function of rows (x, v joined; or q)."""
+    return _advance(step, k, h) if theta is None else _rows(step, h)
+
+
+BLOCK_BYTES = 64 * 2 ** 20     # the sets are advanced in blocks of rows of about this size (two states at most)
+
+
+def _blocked(advance):
+    """``advance`` on rows, block by block into one output array: the map's temporaries are a block's,
+    whatever the sets' size (each row is advanced on its own, so the result is the same bits)."""
+    def f(z):
+        rows = max(1, BLOCK_BYTES // (8 * z.shape[1]))
+        if z.shape[0] <= rows:
+            return advance(z)
+        out = np.empty_like(z)
+        for a in range(0, z.shape[0], rows):
+            out[a:a + rows] = advance(z[a:a + rows])
+        return out
+    return f
+
+
+def _start_values(sets, shapes, invariant):
+    """Every set's invariant at t = 0 (an InvariantValue by key): computed once for every map and h."""
+    return {key: invariant(sets[key].reshape(shapes[key]), key) for key in sets}
+
+
+def _look_for_jumps(entry, advance, image, ctx):
+    """The entry's ``discontinuity`` from the loop's image after one step (:mod:`integrators.audit.jumps`),
+    with I₁ over the continuous pieces where the image jumps."""
+    from .jumps import find_jumps, piecewise_first_invariant
+    z0, D, r, k = ctx["z0"], ctx["D"], ctx["radius"], ctx["k"]
+
+    def at(tau):
+        tau = np.asarray(tau, dtype=float)
+        return z0 + r * (np.cos(2 * np.pi * tau)[:, None] * D[0] + np.sin(2 * np.pi * tau)[:, None] * D[1])
+    found = find_jumps(advance, at, image, ctx["Pz"])
+    found["piecewise"] = None
+    if found["verdict"] == "jumps" and found["candidates"] > found["bisected"]:
+        found["reason"] += (f"; no I₁ over the continuous pieces: {found['candidates'] - found['bisected']} candidate "
+                            "gaps were not bisected, so the pieces are not known")
+    elif found["verdict"] == "jumps":
+        one_form = (_one_form(ctx["theta"]) if ctx["theta"] is not None else
+                    (lambda Z: np.concatenate([Z[:, k:], np.zeros_like(Z[:, k:])], axis=1)))
+        try:
+            found["piecewise"] = piecewise_first_invariant(advance, at, found["jumps"], one_form, ctx["Pz"],
+                                                           ctx["scale"])
+        except Exception as exc:        # the map raised on a piece's points: the jumps stand, no piecewise I₁
+            found["piecewise"] = None
+            found["reason"] += f"; no piecewise I₁ (the map raised: {type(exc).__name__}: {exc})"
+    entry["discontinuity"] = found
+
+
+def _judge_jumps(d, jumps):
+    """A defect verdict ``d`` told of the image's jumps: ``symplectic`` point by point becomes
+    ``discontinuous`` (the defect cannot see a jump, and the closed loop's I₁ is not the map's invariant)."""
+    if jumps is None or jumps["verdict"] != "jumps":
+        return
+    pw = jumps.get("piecewise")
+    piece = ("" if not pw else f"; I₁ over the loop's {pw['pieces']} continuous piece{'s' if pw['pieces'] != 1 else ''} moves by {pw['change']:.2g} "
+             f"of itself in one step" + ("" if pw["settled"] else " (the pieces' sums did not settle: a jump hides inside)"))
+    if d["verdict"] == "symplectic":
+        d["verdict"] = "discontinuous"
+        d["reason"] = ("the defect is at its floor where the map is smooth, but " + jumps["reason"]
+                       + ": the point-wise defect cannot see a jump, and I₁ over the closed loop is not this map's "
+                       "invariant" + piece)
+    else:
+        d["reason"] = (d.get("reason", "") + "; " if d.get("reason") else "") + jumps["reason"] + piece
+
+
+def _sweep_entry(name, form, hs, runs, defect, jacobian, steps):
+    """One map's entry of a sweep: its runs by h, the defect study over the sweep's step sizes, the
+    one-step errors (steps = 1) and a verdict at every h."""
+    d = defect[form]
+    family = d["verdict"]                      # the verdict over the sweep (a larger h can decide a small one)
+    floor = DEFECT_FLOOR["central differences" if "central differences" in jacobian else "complex step"]
+    one = None
+    key = f"I1/{form}"
+    if steps == 1:
+        e = [r["errors"][key][-1] if r["errors"].get(key) and r["breakdown_step"] is None else math.nan for r in runs]
+        res = [r["drift"][key]["resolution"] if key in r["drift"] else math.nan for r in runs]
+        e_arr = np.array(e, dtype=float)
+        # the floor at each h: round-off, or the two values' own uncertainty (error + round-off) if larger
+        floors = [max(ROUNDOFF, (r["uncertainty"][key][0] + r["uncertainty"][key][-1]) / abs(r["drift"][key]["value_at_start"]))
+                  if key in r.get("uncertainty", {}) and r["drift"][key]["value_at_start"] else ROUNDOFF for r in runs]
+        order = fit_order(hs, e_arr, max(floors))
+        above = [x > f and rr <= RESOLVED for x, rr, f in zip(e, res, floors)]
+        verdicts = []
+        for x, rr, f in zip(e, res, floors):
+            verdicts.append("broke down" if not math.isfinite(x) else
+                            "under-resolved" if rr > RESOLVED and x > f else
+                            "not symplectic" if x > f else
+                            "not symplectic (below the floor at this h)" if any(above) else "round-off")
+        one = {"h": hs, "error": e, "floor": floors, "resolution": res, "order": order, "verdict": verdicts}
+    verdicts = []
+    for i, (hk, r) in enumerate(zip(hs, runs)):
+        at = d["h"].index(hk) if hk in d["h"] else None
+        v = d["defect"][at] if at is not None and d["defect"] else math.nan
+        if family == "not symplectic":
+            why = ("its defect is above the floor here" if math.isfinite(v) and v > floor else
+                   "its defect is below the floor at this h, above it at larger h" + (
+                       f" (order {d['order']:.2f})" if d.get("order") is not None else ""))
+            verdict = "not symplectic"
+        else:
+            verdict, why = family, d.get("reason", "")
+        jumps = r["discontinuity"]
+        if jumps is not None and jumps["verdict"] == "jumps":
+            sub = {"verdict": verdict, "reason": why}
+            _judge_jumps(sub, jumps)
+            verdict, why = sub["verdict"], sub["reason"]
+        if one is not None and verdict == "symplectic" and one["verdict"][i].startswith("not symplectic"):
+            verdict, why = "not symplectic", (f"I₁ moves by {one['error'][i]:.2g} of itself in one step although the "
+                                              "defect is at its floor")
+        drift = r["drift"].get(key, {})
+        if verdict == "symplectic" and (one["verdict"][i] == "under-resolved" if one is not None else
+                                        drift.get("verdict") == "under-resolved"):
+            verdict, why = "cannot tell at this h", ("the defect is at its floor, but the loop's image is under-resolved "
+                                                     f"({drift.get('under_resolved_reason') or 'its monitor'}): a "
+                                                     "jump or a fold its points cannot resolve")
+        if r["breakdown_step"] is not None and verdict == "symplectic":
+            verdict, why = "broke down", f"a point broke down at step {r['breakdown_step']}"
+        verdicts.append({"h": hk, "verdict": verdict, "reason": why})
+    return {"name": name, "role": "candidate", "kind": f"{form} map", "jacobian": jacobian, "defect": defect,
+            "runs": runs, "one_step": one, "verdicts": verdicts}
 
 
 def _sets(z0, k, D, radius, loop_points, surface, P, theta, method):
@@ -465,7 +661,7 @@ def _check_period(loop, P):
 
 def _sets_description(loop_points, radius, plane, directions, surface, P, canonical):
     """The report's "sets": the loop, the surface and the periods, as the user gave them."""
-    where = (list(plane) if plane is not None else "given directions" if directions is not None else
+    where = (plane if isinstance(plane, str) else list(plane) if plane is not None else "given directions" if directions is not None else
              "all x against all v" if canonical else [0, 1])
     return {"loop": {"points": int(loop_points), "radius": float(radius), "plane": where},
             "surface": None if surface is None else {"n_sigma": int(surface[0]), "n_tau": int(surface[1])},
@@ -502,7 +698,7 @@ def _advance(step, k, h):
     return f
 
 
-def _defect_study(step, z, hs, probes, method, seed, progress, theta=None):
+def _defect_study(step, z, hs, probes, method, seed, progress, theta=None, period=None):
     """({form: {h, defect, order, verdict}}, the Jacobian method) of a map at points z over the step
     sizes hs (the canonical form, or dϑ with ``theta``), judged against the method's floor as
     :func:`integrators.audit.defect_study`.
@@ -518,7 +714,7 @@ def _defect_study(step, z, hs, probes, method, seed, progress, theta=None):
         if progress:
             progress(hk)
         try:
-            return map_defect(step, z, hk, probes, method, seed, theta=theta)
+            return map_defect(step, z, hk, probes, method, seed, theta=theta, period=period)
         except Exception as exc:         # the user's map raised: a verdict, not a traceback
             return math.nan, f"none ({type(exc).__name__}: {exc})", "—"
 
@@ -589,27 +785,32 @@ def _energy(energy, k, theta):
     return H
 
 
-def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progress, energy=None):
+def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progress, energy=None, start=None,
+           first=None):
     """The sets advanced ``steps`` steps by ``advance(z) -> z`` (rows), ``invariant(part, key)`` at
-    every output (and ``energy(z)``): the entry's drift, errors, energy error and breakdown step."""
+    every output (and ``energy(z)``): the entry's drift, errors, energy error and its growth law, and
+    the breakdown step.  ``start``: the sets' invariants at t = 0 already computed (by key);
+    ``first(z1)`` is called with the sets' rows after the first step."""
     from invariants.growth import growth_law
     from ..service.statuses import relative_error
     z = np.concatenate([sets[key] for key in sets], axis=0)
     cut = np.cumsum([sets[key].shape[0] for key in sets])[:-1]
     t, values, res = [0.0], {key: [] for key in sets}, {key: 0.0 for key in sets}
+    bounds = {key: [] for key in sets}
     why = {key: "" for key in sets}          # the first reason a set was under-resolved, where one is given
 
-    def record(z):
+    def record(z, given=None):
         for key, part in zip(sets, np.split(z, cut)):
-            v = invariant(part.reshape(shapes[key]), key)
+            v = given[key] if given is not None else invariant(part.reshape(shapes[key]), key)
             values[key].append(v.value)
+            bounds[key].append(v.error + v.roundoff * abs(v.value))      # the value's own uncertainty
             res[key] = max(res[key], v.resolution)
             if v.under_resolved and not why[key]:
                 why[key] = f"from t = {t[-1]:g}: " + (
                     v.reason or f"the set's monitor reads {v.resolution:.2g} (> {RESOLVED:g}): more loop points, "
                                 "a smaller radius or fewer steps")
 
-    record(z)
+    record(z, start)
     if energy is not None:
         H0 = energy(z)
         scale = np.where(H0 != 0, np.abs(H0), 1.0)
@@ -625,6 +826,8 @@ def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progr
         if not np.all(np.isfinite(z)):
             broke = n
             break
+        if n == 1 and first is not None:
+            first(z)
         if n % every == 0 or n == steps:
             t.append(n * h)
             record(z)
@@ -644,4 +847,9 @@ def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progr
             "growth_exponent_error": None if g is None else g.exponent_error, "growth_onset": None if g is None else g.onset,
             "value_at_start": values[key][0], "under_resolved_reason": why[key] or None}
         entry["errors"][f"{key}/{form}"] = err.tolist()
+        entry.setdefault("uncertainty", {})[f"{key}/{form}"] = bounds[key]
     entry["t"], entry["breakdown_step"] = t.tolist(), broke
+    if energy is not None:
+        g = growth_law(t, entry["energy_error"]) if broke is None else None
+        entry["energy_growth_law"] = None if g is None else g.law
+        entry["energy_growth_exponent"] = None if g is None else g.exponent

@@ -73,7 +73,9 @@ def _fmt(x, spec=".1e"):
 
 
 def text_report(report) -> str:
-    """The human-readable report."""
+    """The human-readable report (of a sweep over step sizes: :func:`sweep_text`)."""
+    if report.get("sweep"):
+        return sweep_text(report)
     lines = [f"Symplecticity audit on scene '{report['scene']}' ({report['system']}, h = {report['h']:g}, "
              f"{report['steps']} steps, T = {report['T']:g})",
              f"thresholds: round-off ≤ {ROUNDOFF:g}; growth e ∝ t^α of the window maxima (invariants.growth): "
@@ -97,8 +99,9 @@ def text_report(report) -> str:
             if r["verdict"] == "under-resolved" and r.get("under_resolved_reason"):
                 lines.append(f"      why: {r['under_resolved_reason']}")
         if c.get("energy_error"):          # a step map's audit given an energy function
+            law = f"; {c['energy_growth_law']}" if c.get("energy_growth_law") else ""
             lines.append(f"    {'energy':18s} {_fmt(max(c['energy_error'])):>9s}  (max |H − H(0)|/|H(0)| over the "
-                         "points and outputs)")
+                         f"points and outputs{law})")
     lines += ["", "One-step symplecticity defect (relative) for h, h/2, …, fitted order in h, verdict"]
     for c in report["candidates"]:
         lines.append(f"  {c['name']} ({c['role']}, Jacobian by {c['jacobian']})")
@@ -111,13 +114,50 @@ def text_report(report) -> str:
     return "\n".join(lines)
 
 
+def sweep_text(report) -> str:
+    """The human-readable report of a map audit over a list of step sizes: one line per h and map
+    (the defect, the loop's error after one step or the run's largest, the jumps, the verdict), and
+    each map's orders."""
+    mode = report["sweep"]["mode"]
+    lines = [f"Symplecticity audit over {len(report['h'])} step sizes on '{report['scene']}' ({report['system']}, "
+             f"{mode} each; the sets and I(0) built once)",
+             f"thresholds: round-off ≤ {ROUNDOFF:g} (I₁); defect floor {DEFECT_FLOOR['complex step']:g} (complex step), "
+             f"{DEFECT_FLOOR['central differences']:g} (central differences)", "",
+             f"  {'h':>12s} {'defect':>9s} {'I₁ error':>9s} {'jumps':>6s}  verdict"]
+    for c in report["candidates"]:
+        form = next(iter(c["defect"]))
+        d = c["defect"][form]
+        one = c.get("one_step")
+        lines.append(f"  {c['name']} (Jacobian by {c['jacobian']})")
+        for i, (r, v) in enumerate(zip(c["runs"], c["verdicts"])):
+            key = f"I1/{form}"
+            at = d["h"].index(v["h"]) if v["h"] in d["h"] else None
+            dv = d["defect"][at] if at is not None and d["defect"] else None
+            e = one["error"][i] if one else r["drift"].get(key, {}).get("max_error")
+            j = r.get("discontinuity") or {}
+            nj = len(j.get("jumps", [])) if j.get("verdict") == "jumps" else 0
+            lines.append(f"  {v['h']:12.6g} {_fmt(dv):>9s} {_fmt(e):>9s} {nj:6d}  {v['verdict']}")
+            if v["verdict"] != "symplectic" and v.get("reason") and (i == 0 or v["verdict"] != c["verdicts"][i - 1]["verdict"]):
+                lines.append(f"  {'':12s} ({v['reason']})")
+        orders = []
+        if d.get("order") is not None:
+            orders.append(f"defect order {d['order']:.2f}")
+        if one and one.get("order") is not None:
+            orders.append(f"one-step I₁ error order {one['order']:.2f}")
+        if orders:
+            lines.append(f"  {'':12s} " + "; ".join(orders) + " (fitted over the levels above their floors)")
+    return "\n".join(lines)
+
+
 def plot_report(report, directory) -> list[Path]:
-    """Two PNGs: invariant errors against time, defects against h."""
+    """Two PNGs: invariant errors against time, defects against h (a sweep: one, both against h)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
+    if report.get("sweep"):
+        return [_plot_sweep(report, directory, plt)]
     cands = report["candidates"]
     colour = {c["name"]: f"C{k % 10}" for k, c in enumerate(cands)}     # one colour per candidate throughout
     style = {c["name"]: "-" if c["role"] == "candidate" else "--" for c in cands}
@@ -162,3 +202,34 @@ def plot_report(report, directory) -> list[Path]:
     fig.savefig(p2, dpi=80)
     plt.close(fig)
     return [p1, p2]
+
+
+def _plot_sweep(report, directory, plt):
+    """A sweep's PNG: each map's defect and I₁ error (one step, or the run's largest) against h, jumps
+    and verdicts marked (× where the map's image jumps)."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), squeeze=False)
+    for n, c in enumerate(report["candidates"]):
+        form = next(iter(c["defect"]))
+        d, one, col = c["defect"][form], c.get("one_step"), f"C{n % 10}"
+        if d["defect"]:
+            axes[0][0].loglog(np.abs(d["h"]), np.maximum(d["defect"], 1e-18), "o-", color=col, ms=3, label=c["name"])
+        hs = [v["h"] for v in c["verdicts"]]
+        e = one["error"] if one else [r["drift"].get(f"I1/{form}", {}).get("max_error", math.nan) for r in c["runs"]]
+        axes[0][1].loglog(np.abs(hs), np.maximum(np.array(e, float), 1e-18), "o-", color=col, ms=3, label=c["name"])
+        jumpy = [i for i, v in enumerate(c["verdicts"]) if v["verdict"] == "discontinuous"]
+        if jumpy:
+            axes[0][1].loglog(np.abs(np.array(hs))[jumpy], np.maximum(np.array(e, float)[jumpy], 1e-18), "x",
+                              color=col, ms=8)
+    axes[0][0].axhline(DEFECT_FLOOR["complex step"], color="grey", lw=0.5)
+    axes[0][1].axhline(ROUNDOFF, color="grey", lw=0.5)
+    axes[0][0].set_title("one-step defect", fontsize=9)
+    axes[0][1].set_title("|I₁(h) − I₁(0)|/|I₁(0)| after " + report["sweep"]["mode"] + " (×: the image jumps)", fontsize=9)
+    for ax in axes[0]:
+        ax.set_xlabel("h")
+    axes[0][1].legend(fontsize=8)
+    fig.suptitle(f"audit over step sizes, {report['scene']} (grey: the floors)", fontsize=10)
+    fig.tight_layout()
+    path = directory / "audit_sweep.png"
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
