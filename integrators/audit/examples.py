@@ -80,15 +80,18 @@ def landau_start(N, L, alpha=0.01, mode=1, seed=1):
 
 def bspline_shape(x, dx, M, degree):
     """Per particle (..., N): its cell j = ⌊x/Δ⌋ mod M and, for each node j + o of its support
-    (o in 0, 1 for degree 1; −1 … 2 for degree 3), the B-spline shape S((x − X_{j+o})/Δ) and S' there,
+    (o in 0, 1 for degree 1; −1, 0, 1 for degree 2, j the node nearest x; −1 … 2 for degree 3), the B-spline shape S((x − X_{j+o})/Δ) and S' there,
     as polynomials of f = x/Δ − ⌊x/Δ⌋ ∈ [0, 1) (analytic in f, so complex-step safe; the floor from
     the real part)."""
-    xs = x / dx
+    xs = x / dx + (0.5 if degree == 2 else 0.0)    # degree 2: f from the cell's middle (its breakpoints)
     fl = np.floor(np.real(xs))
     f = xs - fl
     j = fl.astype(np.int64) % M
     if degree == 1:
         return j, (1 - f, f), (-np.ones_like(f), np.ones_like(f))
+    if degree == 2:                                # nodes j − 1, j, j + 1: x/Δ = j + f − ½
+        g, c = 1 - f, f - 0.5
+        return j, (g * g / 2, 0.75 - c * c, f * f / 2), (-g, -2 * c, f)
     g, f2 = 1 - f, f * f
     f3 = f2 * f
     return j, (g * g * g / 6, (3 * f3 - 6 * f2 + 4) / 6, (-3 * f3 + 3 * f2 + 3 * f + 1) / 6, f3 / 6), \
@@ -97,9 +100,9 @@ def bspline_shape(x, dx, M, degree):
 
 def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"):
     """A 1-D electrostatic PIC step (electrons, charge −1 and mass 1 in total, ions a fixed background):
-    (step, info).  Positions on [0, L) (period L); ``degree`` 1 or 3; ``method`` 'strang' or 'rk2'."""
-    if degree not in (1, 3):
-        raise ValueError(f"degree must be 1 or 3, got {degree!r}")
+    (step, info).  Positions on [0, L) (period L); ``degree`` 1, 2 or 3; ``method`` 'strang' or 'rk2'."""
+    if degree not in (1, 2, 3):
+        raise ValueError(f"degree must be 1, 2 or 3, got {degree!r}")
     if method not in ("strang", "rk2"):
         raise ValueError(f"method must be 'strang' or 'rk2', got {method!r}")
     N, M, L = int(particles), int(cells), float(length)
@@ -108,7 +111,7 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
     kk = TWO_PI * np.fft.rfftfreq(M, d=dx)
     inv_k2 = np.zeros_like(kk)
     inv_k2[1:] = 1.0 / kk[1:] ** 2
-    offsets = (0, 1) if degree == 1 else (-1, 0, 1, 2)    # the nodes a particle's shape touches, from j
+    offsets = {1: (0, 1), 2: (-1, 0, 1), 3: (-1, 0, 1, 2)}[degree]   # the nodes a particle's shape touches, from j
     E = M + 3                             # nodes with ghosts: node m of the support at column m + 1
 
     def _shape(x):
@@ -171,7 +174,8 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
                            f"{'Strang splitting' if method == 'strang' else 'RK2'}")
 
 
-EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2")
+EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2", "pic2-strang",
+            "pic2-rk2")
 
 
 def defaults(name, k=None):
@@ -192,8 +196,8 @@ def example(name, k=None):
 
     pendula: angles uniform in [0, 2π) and momenta normal with deviation 0.5 (numpy's generator of
     seed 1), h = 0.1, loop radius 0.01 (at 0.1 the loop of 4,096 pendula stretches out of resolution
-    within 100 steps: near-separatrix pendula; the monitor says so).  pic (cubic B-splines) and pic1
-    (linear): 64 cells on [0, 4π), a Landau-damping start (α = 0.01, mode 1), h = 0.1, radius 0.1."""
+    within 100 steps: near-separatrix pendula; the monitor says so).  pic (cubic B-splines), pic2
+    (quadratic) and pic1 (linear): 64 cells on [0, 4π), a Landau-damping start (α = 0.01, mode 1), h = 0.1, radius 0.1."""
     family, method = name.split("-")
     k = defaults(name, k)["k"]
     if family == "pendula":
@@ -201,7 +205,7 @@ def example(name, k=None):
         rng = np.random.default_rng(1)
         info["point"] = (rng.uniform(0.0, TWO_PI, k), 0.5 * rng.standard_normal(k))
     else:
-        step, info = pic(particles=k, degree=3 if family == "pic" else 1, method=method)
+        step, info = pic(particles=k, degree={"pic": 3, "pic1": 1, "pic2": 2}[family], method=method)
         info["point"] = info["landau"]()
     info.update({key: v for key, v in defaults(name, k).items() if key != "k"})   # pendula: radius 0.01 (docstring)
     return step, info

@@ -1,0 +1,99 @@
+"""Barham & Burby's PIC sweep in one call per degree (docs/audit.md, "Sweeps over step sizes").
+
+    python scripts/studies/audit_sweep.py                                # the full size (~N min on 2 cores)
+    python scripts/studies/audit_sweep.py --particles 1024 --loop-points 4096 --json small.json
+
+A 1-D electrostatic PIC (integrators.audit.examples.pic: B-splines of degree 1, 2, 3, the field
+energy's exact gradient, a Landau start α = 0.01), Strang and RK2, ten step sizes dt = 2⁻¹ … 2⁻¹⁰,
+audited by one ``audit_map`` call per degree in one-step mode (``steps=1``) on a loop of radius 1 in
+every coordinate (``plane="every"``, the study's loop).  Each degree runs in its own process: its
+wall and CPU time, peak resident memory (ru_maxrss), and every verdict, defect, one-step error and
+jump count go to the JSON; the table is printed as markdown.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HS = [2.0 ** -j for j in range(1, 11)]
+
+
+def one(degree, particles, cells, loop_points, radius):
+    """One degree's audit in this process: a JSON-able row."""
+    from integrators.audit import examples
+    from integrators.audit.maps import audit_map
+    maps, info = {}, None
+    for method in ("strang", "rk2"):
+        maps[method], info = examples.pic(particles=particles, cells=cells, degree=degree, method=method)
+    t0, c0 = time.perf_counter(), time.process_time()
+    rep = audit_map(maps, info["landau"](), HS, steps=1, loop_points=loop_points, radius=radius, plane="every",
+                    period=info["period"], defect_points=2)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    out = {"degree": degree, "particles": particles, "cells": cells, "loop_points": loop_points, "radius": radius,
+           "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
+           "peak_rss_MiB": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+           "state_MiB": round(loop_points * 2 * particles * 8 / 2**20), "maps": {}}
+    for c in rep["candidates"]:
+        d = c["defect"]["canonical"]
+        out["maps"][c["name"]] = {
+            "h": HS, "verdict": [v["verdict"] for v in c["verdicts"]],
+            "defect": [d["defect"][d["h"].index(h)] for h in HS], "defect_order": d["order"],
+            "one_step_error": c["one_step"]["error"], "one_step_order": c["one_step"]["order"],
+            "jumps": [len(r["discontinuity"]["jumps"]) if r["discontinuity"] else None for r in c["runs"]]}
+    return out
+
+
+def markdown(rows):
+    lines = ["| degree | map | verdicts dt = 2⁻¹ … 2⁻¹⁰ | defect at 2⁻¹, 2⁻¹⁰ (order) | one-step e at 2⁻¹, 2⁻¹⁰ "
+             "(order) | jumps found | wall · CPU | peak memory (state) |", "|---|---|---|---|---|---|---|---|"]
+    short = {"symplectic": "S", "not symplectic": "N", "discontinuous": "D", "cannot tell at this h": "?",
+             "broke down": "B"}
+    for r in rows:
+        for name, m in r["maps"].items():
+            o = "—" if m["defect_order"] is None else f"{m['defect_order']:.2f}"
+            o1 = "—" if m["one_step_order"] is None else f"{m['one_step_order']:.2f}"
+            lines.append(f"| {r['degree']} | {name} | {''.join(short.get(v, '?') for v in m['verdict'])} | "
+                         f"{m['defect'][0]:.1e}, {m['defect'][-1]:.1e} ({o}) | {m['one_step_error'][0]:.1e}, "
+                         f"{m['one_step_error'][-1]:.1e} ({o1}) | {max(m['jumps'])} | {r['wall_s']:.0f} s · "
+                         f"{r['cpu_s']:.0f} s | {r['peak_rss_MiB']:,} MiB ({r['state_MiB']:,} MiB) |")
+    return "\n".join(lines) + "\n\nS symplectic, N not symplectic, D discontinuous (the loop's image jumps)."
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--particles", type=int, default=4096)
+    ap.add_argument("--cells", type=int, default=128)
+    ap.add_argument("--loop-points", type=int, default=16384)
+    ap.add_argument("--radius", type=float, default=1.0)
+    ap.add_argument("--degrees", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)   # a child: one degree, JSON on stdout
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    if a.one is not None:
+        print(json.dumps(one(a.one, a.particles, a.cells, a.loop_points, a.radius)))
+        return
+    rows = []
+    for deg in a.degrees:
+        child = subprocess.run([sys.executable, __file__, "--one", str(deg), "--particles", str(a.particles),
+                                "--cells", str(a.cells), "--loop-points", str(a.loop_points), "--radius",
+                                str(a.radius)], capture_output=True, text=True)
+        if child.returncode != 0:
+            raise SystemExit(child.stderr)
+        rows.append(json.loads(child.stdout.strip().splitlines()[-1]))
+        print(f"degree {deg}: {rows[-1]['wall_s']} s", file=sys.stderr, flush=True)
+    print(markdown(rows))
+    if a.json:
+        Path(a.json).write_text(json.dumps({"machine": platform.platform(), "date": time.strftime("%Y-%m-%d"),
+                                            "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
