@@ -428,3 +428,25 @@ def test_central_differences_and_the_complex_step_check_see_through_a_wrap():
     assert used == "central differences" and d < 1e-10
     d_raw, _, _ = map_defect(step, z, 0.1, method="central differences")
     assert d_raw > 1e-3
+
+
+def test_a_loop_of_many_degrees_of_freedom_has_its_i1_summed_over_blocks():
+    """k = 600 (> INVARIANT_COLUMNS = 256): the audit's canonical I₁ is summed over three blocks of
+    coordinates, each with its monitor; the value is the whole loop's to 1e-14 and −πr²k to 1e-13
+    (radius r in every coordinate), its error bound at least the whole loop's less round-off, and
+    a wrapped coordinate without its period still makes the loop under-resolved."""
+    import invariants
+    from integrators.audit import maps
+    from integrators.audit.maps import _invariants, _loop, _plane
+    k, r = 600, 0.3
+    rng = np.random.default_rng(5)
+    z = _loop(np.concatenate([rng.uniform(0, 6, k), rng.standard_normal(k)]), _plane(2 * k, "every", None), r, 256)
+    P = np.full(k, 2 * np.pi)
+    blocked = _invariants(z, k, P, "I1")
+    whole = invariants.first_invariant(z[:, :k], "canonical", p=z[:, k:], period=P)
+    assert k > maps.INVARIANT_COLUMNS
+    assert abs(blocked.value - whole.value) <= 1e-14 * abs(whole.value)
+    assert abs(blocked.value + np.pi * r * r * k) <= 1e-13 * np.pi * r * r * k
+    assert not blocked.under_resolved and blocked.error >= 0.5 * whole.error
+    wrapped = np.mod(z[:, :k] + 3.0, 2 * np.pi)                  # angles wrapped, no period given
+    assert _invariants(np.concatenate([wrapped, z[:, k:]], axis=1), k, None, "I1").under_resolved

@@ -360,16 +360,48 @@ def _surface(z0, D, radius, ns, nt):
     return z0 + radius * (a[..., None] * D[0] + b[..., None] * D[1])
 
 
+INVARIANT_COLUMNS = 256   # a canonical loop of more degrees of freedom has its I₁ summed over blocks of this many
+
+
 def _invariants(z, k, P, kind, theta=None):
     """The set's canonical invariant (positions' periods P), or with ``theta`` its noncanonical one
-    (∮ ϑ·dq, ∫∫ dϑ with Ω from :func:`two_form`; P one entry per coordinate)."""
+    (∮ ϑ·dq, ∫∫ dϑ with Ω from :func:`two_form`; P one entry per coordinate).  A canonical loop of
+    more than ``INVARIANT_COLUMNS`` degrees of freedom: :func:`_blocked_first_invariant`."""
     import invariants
     f = invariants.first_invariant if kind == "I1" else invariants.second_invariant
     if theta is not None:
         form = _one_form(theta) if kind == "I1" else (lambda Q: two_form(theta, Q))
         return f(z, form, period=P)
     x, v = z[..., :k], z[..., k:]
+    if kind == "I1" and k > INVARIANT_COLUMNS:
+        return _blocked_first_invariant(x, v, P)
     return f(x, "canonical", p=v, period=P)
+
+
+def _blocked_first_invariant(x, v, P):
+    """The canonical I₁ = Σ_i ∮ v_i dx_i of a loop (N, k) as the sum of its blocks of
+    ``INVARIANT_COLUMNS`` coordinate pairs, each with its monitor, so that the transforms' temporaries
+    are a block's (five states of the whole loop at once): the value is the blocks' values summed in
+    order (a fixed block size: the same bits whatever the machine); ``error`` and the round-off are
+    the blocks' summed (a sum of bounds bounds the sum); ``resolution`` the largest of the blocks'
+    (each read against its own value, so at least the whole loop's spectral reading) and of the
+    summed error over |I₁|, as :func:`invariants.forms._value` reads it; the first block's reason."""
+    from invariants import spectral
+    from invariants.forms import UNDER_RESOLVED, InvariantValue
+    import invariants
+    k, C = x.shape[1], INVARIANT_COLUMNS
+    parts = [invariants.first_invariant(x[:, a:a + C], "canonical", p=v[:, a:a + C],
+                                        period=None if P is None else P[a:a + C]) for a in range(0, k, C)]
+    value = 0.0
+    for b in parts:
+        value += b.value
+    rounding = sum(b.roundoff * abs(b.value) for b in parts)          # each block's error holds its round-off
+    pure = sum(b.error for b in parts) - rounding
+    reason = next((b.reason for b in parts if b.reason), "")
+    reading = spectral.relative(pure, value) if pure > 2.0 * rounding else 0.0      # as invariants.forms._value
+    res = max([reading, 1.0 if reason else 0.0] + [b.resolution for b in parts])
+    return InvariantValue(value, float(res), bool(res > UNDER_RESOLVED), float(pure + rounding),
+                          float(spectral.relative(rounding, value)), reason, 1)
 
 
 def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024, radius=0.1, plane=None,
@@ -444,19 +476,23 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
     D = _plane(n, plane, directions, canonical=theta is None)
     sets, shapes = _sets(z0, k, D, radius, loop_points, surface, P, theta, method)
     loop = sets["I1"]
+    N = loop.shape[0]
     form = "canonical" if theta is None else "noncanonical"
     sel = np.linspace(0, loop.shape[0], defect_points, endpoint=False).astype(int)
+    points = loop[sel].copy()             # the defect's points
     report = {"scene": name if not isinstance(step, dict) else "maps", "h": hs if sweep else hs[0], "steps": steps,
               "T": [hk * steps for hk in hs] if sweep else hs[0] * steps,
               "system": f"canonical map, k = {k} ({2 * k}-dimensional phase space)" if theta is None else
               f"noncanonical map with a one-form of code, d = {n}",
               "thresholds": {"roundoff": ROUNDOFF, "resolved": RESOLVED, "defect_floor": DEFECT_FLOOR},
-              "defect_points": loop[sel].tolist() if n <= 64 else f"{len(sel)} points of the loop",
+              "defect_points": points.tolist() if n <= 64 else f"{len(sel)} points of the loop",
               "sets": _sets_description(loop_points, radius, plane, directions, surface, P, theta is None),
               "discrimination": None,       # the canonical form is not constant along a general map
               "candidates": []}
     invariant = (lambda part, key: _invariants(part, k, P, key, theta))
     start = _start_values(sets, shapes, invariant)          # I(0) of every set, once for every map and h
+    del sets, loop                        # each run builds its sets afresh (the same bits), so that a run
+    fresh = (lambda: _sets(z0, k, D, radius, loop_points, surface, P, theta, method)[0])   # holds two states
     Pz = None if P is None else (P if theta is not None else np.concatenate([P, np.zeros(k)]))
     ctx = dict(k=k, z0=z0, D=D, radius=float(radius), Pz=Pz, theta=theta, scale=abs(start["I1"].value))
     for nm, s in maps.items():
@@ -467,15 +503,15 @@ def audit_map(step, point, h, *, steps=100, output_every=None, loop_points=1024,
                      "drift": {}, "t": [], "errors": {}, "defect": {}, "jacobian": None, "discontinuity": None}
             advance = _mapped(s, hk, k, theta)
             with np.errstate(all="ignore"):  # a map's overflow is its breakdown or its NaN defect: reported, not warned
-                _drift(entry, _blocked(advance), sets, shapes, invariant, form, steps, hk, every,
+                _drift(entry, _blocked(advance), fresh, shapes, invariant, form, steps, hk, every,
                        None if say is None else (lambda msg, hk=hk: say(f"h = {hk:g}: {msg}")),
                        _energy(energy, k, theta), start=start,
-                       first=lambda z1, entry=entry, advance=advance: _look_for_jumps(entry, advance, z1[:loop.shape[0]], ctx))
+                       first=lambda z1, entry=entry, advance=advance: _look_for_jumps(entry, advance, z1[:N], ctx))
             runs.append(entry)
         levels_h = sorted(hs, key=abs, reverse=True) if sweep else [hs[0] * 2.0 ** -l for l in range(levels)]
         with np.errstate(all="ignore"):
             defect, jacobian = _defect_study(
-                s, loop[sel], levels_h, probes, method, seed,
+                s, points, levels_h, probes, method, seed,
                 None if say is None else (lambda hk: say(f"one-step defect at h = {hk:g}")), theta, Pz)
         if not sweep:
             entry = runs[0]
@@ -785,16 +821,20 @@ def _energy(energy, k, theta):
     return H
 
 
-def _drift(entry, advance, sets, shapes, invariant, form, steps, h, every, progress, energy=None, start=None,
+def _drift(entry, advance, fresh, shapes, invariant, form, steps, h, every, progress, energy=None, start=None,
            first=None):
     """The sets advanced ``steps`` steps by ``advance(z) -> z`` (rows), ``invariant(part, key)`` at
     every output (and ``energy(z)``): the entry's drift, errors, energy error and its growth law, and
     the breakdown step.  ``start``: the sets' invariants at t = 0 already computed (by key);
-    ``first(z1)`` is called with the sets' rows after the first step."""
+    ``first(z1)`` is called with the sets' rows after the first step; ``fresh()`` builds the sets
+    ({key: rows}), here, so that nothing else holds them once the first step is taken."""
+    sets = fresh()
     from invariants.growth import growth_law
     from ..service.statuses import relative_error
-    z = np.concatenate([sets[key] for key in sets], axis=0)
+    z = np.concatenate([sets[key] for key in sets], axis=0) if len(sets) > 1 else sets[next(iter(sets))]
+    # (one set: its rows themselves; the map returns new arrays, so the set is not changed)
     cut = np.cumsum([sets[key].shape[0] for key in sets])[:-1]
+    sets = list(sets)                        # the keys: the rows are z's alone now
     t, values, res = [0.0], {key: [] for key in sets}, {key: 0.0 for key in sets}
     bounds = {key: [] for key in sets}
     why = {key: "" for key in sets}          # the first reason a set was under-resolved, where one is given
