@@ -127,6 +127,8 @@ def _periods(period, d):
 def _unwrap(q, P, axis):
     """q with each periodic coordinate's differences along ``axis`` taken into [−P/2, P/2)
     (the first sample stays where it is)."""
+    if q.ndim == 2 and axis == 0 and q.dtype == np.float64:
+        return _unwrap_loop(np.ascontiguousarray(q), np.asarray(P, dtype=np.float64))
     out = q.copy()
     j = np.flatnonzero(P)
     x = np.take(q[..., j], np.arange(q.shape[axis]), axis=axis)
@@ -135,6 +137,25 @@ def _unwrap(q, P, axis):
     dx = dx - Pj * np.floor(dx / Pj + 0.5)
     first = np.take(x, [0], axis=axis)
     out[..., j] = np.concatenate([first, first + np.cumsum(dx, axis=axis)], axis=axis)
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _unwrap_loop(q, P):
+    """:func:`_unwrap` of a loop (N, d) along its points, in one pass: the same operations in the same
+    order as the numpy version (each difference d − P⌊d/P + ½⌋, summed from the first sample in
+    sequence, as cumsum does), so the same bits, without its five temporaries of the loop's size
+    (they were 40 % of I₁'s time on 4,096 × 2,048)."""
+    n, d = q.shape
+    out = q.copy()
+    total = np.zeros(d)
+    for i in range(1, n):
+        for c in range(d):
+            if P[c] != 0.0:
+                dx = q[i, c] - q[i - 1, c]
+                dx = dx - P[c] * np.floor(dx / P[c] + 0.5)
+                total[c] += dx
+                out[i, c] = q[0, c] + total[c]
     return out
 
 

@@ -378,3 +378,27 @@ def test_the_tail_models_of_narrow_spectra_are_the_numpy_paths_numbers():
             for got, c in zip(spectral.tail_models([A, B]), (A, B)):
                 want = spectral._tail(c, K, top, k1, k3, False, 0.5)
                 assert got[0] == top and all(np.array_equal(x, y, equal_nan=True) for x, y in zip(got[1:], want))
+
+
+def test_the_compiled_unwrap_of_a_loop_gives_the_numpy_formulas_bits():
+    """invariants.forms._unwrap of a loop runs compiled in one pass; it must give the bits of the
+    numpy formula it replaces (each difference d − P⌊d/P + ½⌋, summed in sequence from the first
+    sample by cumsum), on loops with wraps, non-periodic coordinates and periods of any size."""
+    from invariants import forms
+
+    def reference(q, P):
+        out = q.copy()
+        j = np.flatnonzero(P)
+        dx = np.diff(q[:, j], axis=0)
+        dx = dx - P[j] * np.floor(dx / P[j] + 0.5)
+        out[:, j] = np.concatenate([q[:1, j], q[:1, j] + np.cumsum(dx, axis=0)], axis=0)
+        return out
+
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        N, d = int(rng.integers(4, 2000)), int(rng.integers(1, 30))
+        P = np.where(rng.random(d) < 0.6, rng.uniform(0.1, 10, d), 0.0)
+        P[0] = P[0] or 1.0
+        q = np.cumsum(rng.standard_normal((N, d)) * rng.uniform(0.01, 3), axis=0)
+        q = np.where(P > 0, np.mod(q, np.where(P > 0, P, 1.0)), q)
+        assert forms._unwrap(q, P, 0).tobytes() == reference(q, P).tobytes()
