@@ -1,14 +1,16 @@
-"""Barham & Burby's PIC sweep in one call per degree (docs/audit.md, "Sweeps over step sizes").
+"""Barham & Burby's sweeps in one audit_map call each (docs/audit.md, "Sweeps over step sizes").
 
-    python scripts/studies/audit_sweep.py                                # the full size (~N min on 2 cores)
+    python scripts/studies/audit_sweep.py --json pic.json                 # the PIC at full size (~35 min on 2 cores)
     python scripts/studies/audit_sweep.py --particles 1024 --loop-points 4096 --json small.json
+    python scripts/studies/audit_sweep.py --pendula 4096 --loop-points 4096 --json pendula.json
 
 A 1-D electrostatic PIC (integrators.audit.examples.pic: B-splines of degree 1, 2, 3, the field
 energy's exact gradient, a Landau start α = 0.01), Strang and RK2, ten step sizes dt = 2⁻¹ … 2⁻¹⁰,
 audited by one ``audit_map`` call per degree in one-step mode (``steps=1``) on a loop of radius 1 in
 every coordinate (``plane="every"``, the study's loop).  Each degree runs in its own process: its
 wall and CPU time, peak resident memory (ru_maxrss), and every verdict, defect, one-step error and
-jump count go to the JSON; the table is printed as markdown.
+jump count go to the JSON; the table is printed as markdown.  ``--pendula K``: the pendulum array
+instead (integrators.audit.examples.pendulum_array, K pendula, Strang and RK2, the same sweep and loop).
 """
 from __future__ import annotations
 
@@ -26,15 +28,23 @@ import numpy as np
 HS = [2.0 ** -j for j in range(1, 11)]
 
 
-def one(degree, particles, cells, loop_points, radius):
-    """One degree's audit in this process: a JSON-able row."""
+def one(degree, particles, cells, loop_points, radius, pendula=None):
+    """One degree's audit (or with ``pendula``, the pendulum array's) in this process: a JSON-able row."""
     from integrators.audit import examples
     from integrators.audit.maps import audit_map
     maps, info = {}, None
     for method in ("strang", "rk2"):
-        maps[method], info = examples.pic(particles=particles, cells=cells, degree=degree, method=method)
+        if pendula:
+            maps[method], info = examples.pendulum_array(pendula, method=method)
+        else:
+            maps[method], info = examples.pic(particles=particles, cells=cells, degree=degree, method=method)
+    if pendula:
+        rng = np.random.default_rng(1)
+        point, particles, degree = (rng.uniform(0, 2 * np.pi, pendula), 0.5 * rng.standard_normal(pendula)), pendula, "pendula"
+    else:
+        point = info["landau"]()
     t0, c0 = time.perf_counter(), time.process_time()
-    rep = audit_map(maps, info["landau"](), HS, steps=1, loop_points=loop_points, radius=radius, plane="every",
+    rep = audit_map(maps, point, HS, steps=1, loop_points=loop_points, radius=radius, plane="every",
                     period=info["period"], defect_points=2)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     out = {"degree": degree, "particles": particles, "cells": cells, "loop_points": loop_points, "radius": radius,
@@ -74,17 +84,19 @@ def main(argv=None):
     ap.add_argument("--loop-points", type=int, default=16384)
     ap.add_argument("--radius", type=float, default=1.0)
     ap.add_argument("--degrees", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument("--pendula", type=int, default=None, help="the pendulum array of this many pendula instead")
     ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)   # a child: one degree, JSON on stdout
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     if a.one is not None:
-        print(json.dumps(one(a.one, a.particles, a.cells, a.loop_points, a.radius)))
+        print(json.dumps(one(a.one, a.particles, a.cells, a.loop_points, a.radius, a.pendula)))
         return
     rows = []
-    for deg in a.degrees:
+    for deg in ([0] if a.pendula else a.degrees):
         child = subprocess.run([sys.executable, __file__, "--one", str(deg), "--particles", str(a.particles),
                                 "--cells", str(a.cells), "--loop-points", str(a.loop_points), "--radius",
-                                str(a.radius)], capture_output=True, text=True)
+                                str(a.radius)] + (["--pendula", str(a.pendula)] if a.pendula else []),
+                               capture_output=True, text=True)
         if child.returncode != 0:
             raise SystemExit(child.stderr)
         rows.append(json.loads(child.stdout.strip().splitlines()[-1]))
