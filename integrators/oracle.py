@@ -20,6 +20,9 @@ class Oracle:
         mpmath.mp.dps = dps
         self.s, self.d = tableau.s, system.d
         rec = projection_record(projection)
+        if rec.post_term is not None:
+            raise ValueError(f"projection '{rec.name}' has its own post term, which the oracle does not apply (it "
+                             "solves the paper's projection)")
         self.rec, self.sigma = rec, mpmath.mpf(rec.sigma(tableau))
         ex = tableau.exact
         self.a = [[mpmath.mpf(ex["a"][i, j]) for j in range(self.s)] for i in range(self.s)]

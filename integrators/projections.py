@@ -30,6 +30,7 @@ p_n = ϑ(q_n) (eq:fibre_derivative); ``none`` carries its own p_n.
 from __future__ import annotations
 
 import dataclasses
+import re
 
 PROJECTIONS = ("none", "standard", "symmetric", "symplectic", "midpoint")
 
@@ -66,6 +67,13 @@ class Projection:
     labels: tuple
     post_term: object = None
 
+    def __post_init__(self):
+        # the name is a run file's group name after the tableau's and a '-' (output.split_pair_name):
+        # letters, digits and '_' only, so that every pair's name splits back into its two parts
+        if not isinstance(self.name, str) or not re.fullmatch(r"[A-Za-z0-9_]+", self.name):
+            raise ValueError(f"a projection's name must be letters, digits and '_' (it follows the tableau's name "
+                             f"and a '-' in run files), got {self.name!r}")
+
     @property
     def coupled(self) -> bool:
         return self.pre == "unknown"
@@ -90,6 +98,12 @@ RECORDS = {r.name: r for r in (
     Projection("midpoint", "unknown", "midpoint", True, "midpoint", "R_inf",
                ("eq:symplectic_midpoint_projection_pre", "eq:symplectic_midpoint_projection_post")),
 )}
+
+
+def names() -> tuple:
+    """The projections a pair may name, the rows of :data:`RECORDS` as they are now (a row added
+    there is named by ``integrate``, scenes, the audit and run files alike)."""
+    return tuple(RECORDS)
 
 
 def projection_record(name) -> Projection:

@@ -337,6 +337,9 @@ class Stepper:
         self.system, self.tableau, self.projection, self.h = system, tableau, projection, float(h)
         self.accept_unconverged, self.unconverged = accept_unconverged, 0
         self.record = rec = projection_record(projection)      # the paper's table row, as the kernel reads it
+        if rec.post_term is not None:
+            raise ValueError(f"projection '{rec.name}' has its own post term, which the reference engine does not "
+                             "apply (it solves the paper's projection): compare it with the compiled engine only")
         self.sigma = rec.sigma(tableau)
         self.coupled = rec.coupled
         self.lobatto = tableau.d is not None

@@ -64,10 +64,10 @@ def test_a_record_is_taken_in_place_of_a_name():
     """integrate takes a Projection record as it takes a name: the standard projection's row written
     out is the built-in standard projection, bit for bit."""
     sy, q0 = _vortices(3)
-    mine = Projection("my standard", "none", "start", True, "end", "one", ())
+    mine = Projection("my_standard", "none", "start", True, "end", "one", ())
     a = integrators.integrate(sy, q0, tableau="GLRK3", projection=mine, h=0.1, steps=5)
     b = integrators.integrate(sy, q0, tableau="GLRK3", projection="standard", h=0.1, steps=5)
-    assert a.projection == "my standard"
+    assert a.projection == "my_standard"
     assert np.array_equal(a.q, b.q) and np.array_equal(a.p, b.p) and np.array_equal(a.lam, b.lam)
 
 
@@ -80,3 +80,27 @@ def test_a_post_term_needs_a_projection_solved_after_the_step():
     with pytest.raises(ValueError, match="not solved after"):
         integrators.Engine(integrators.system("point_vortices"), T, coupled, 0.1)
     assert "unknown projection 'sixth'" in admission(T, "sixth")
+
+
+def test_one_list_of_projections_for_scenes_the_audit_and_run_files(with_identity):
+    """A row added to RECORDS is named by a scene's run.projections and by the audit as by
+    integrate (they read the one list, integrators.projections.names()); its pair's name in a run file
+    splits back into the tableau and it.  A name that would not split (a '-') is refused in one line
+    when the row is made; the reference engine and the oracle refuse a post term they would not apply."""
+    from helpers import LV_PAIRS
+    from integrators import audit
+    from integrators.oracle import Oracle
+    from integrators.reference import Stepper
+    from integrators.service.output import split_pair_name
+    from integrators.service.scene import parse_scene
+    assert "identity" in projections.names()
+    sc = parse_scene(LV_PAIRS.replace('projections = ["none", "standard"]', 'projections = ["none", "identity"]'))
+    assert [(p.label, p.projection) for p in sc.pairs][:2] == [("GLRK1", "none"), ("GLRK1", "identity")]
+    cand, = audit.candidates_from("GLRK2", ["identity"])
+    assert cand.name == "GLRK2-identity" and split_pair_name(cand.name) == ("GLRK2", "identity")
+    with pytest.raises(ValueError, match="letters, digits and '_'"):
+        Projection("my-standard", "none", "start", True, "end", "one", ())
+    sy, T = integrators.system("point_vortices"), integrators.tableau("GLRK2")
+    for engine in (Stepper, Oracle):
+        with pytest.raises(ValueError, match="own post term"):
+            engine(sy, T, "identity", 0.1)

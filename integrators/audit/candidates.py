@@ -61,7 +61,7 @@ def candidates_from(spec: str, projections=None, what="candidate") -> list[Candi
     A tableau is audited with every projection in ``projections`` that it admits (default: all
     five; the symmetric, symplectic and midpoint projections need |R(∞)| = 1).
     """
-    from ..projections import PROJECTIONS, admission
+    from ..projections import PROJECTIONS, admission, names
     from ..tableaus import TABLEAU_NAMES, tableau, tableau_from_file
     if spec in TABLEAU_NAMES:
         tab = tableau(spec)
@@ -77,8 +77,8 @@ def candidates_from(spec: str, projections=None, what="candidate") -> list[Candi
                          "a .toml tableau file, or module:function")
     wanted = list(projections) if projections else list(PROJECTIONS)
     for p in wanted:
-        if p not in PROJECTIONS:
-            raise ValueError(f"unknown projection '{p}'; choose from {', '.join(PROJECTIONS)}")
+        if p not in names():
+            raise ValueError(f"unknown projection '{p}'; choose from {', '.join(names())}")
     ok = [p for p in wanted if admission(tab, p) is None]
     if not ok:
         raise ValueError(f"{tab.name} has R(∞) = {tab.R_inf:g}: none of {', '.join(wanted)} applies")

@@ -110,7 +110,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..engine import PRECISIONS, Tolerances
-from ..projections import PROJECTIONS, admission
+from ..projections import admission, names as projection_names
 from ..systems import SYSTEM_NAMES, system as builtin_system
 from ..tableaus import tableau as builtin_tableau
 from invariants.forms import MIN_POINTS
@@ -713,7 +713,7 @@ def _pairs_of(run, base):
     if maps and run.get("tableaus") == [] and run.get("projections", []) == []:
         run = {k: v for k, v in run.items() if k not in ("tableaus", "projections")}   # step maps only
     tabs, tableau_files = _tableaus(run["tableaus"], base) if "tableaus" in run else ((), {})
-    projs = _names(run["projections"], PROJECTIONS, "run.projections") if "projections" in run else ()
+    projs = _names(run["projections"], projection_names(), "run.projections") if "projections" in run else ()
     if bool(tabs) != bool(projs):
         raise SceneError("run.tableaus and run.projections go together: give both or neither")
     return maps, tabs, tableau_files, projs
