@@ -686,7 +686,8 @@ def _check_area(D, z0, k, theta, method):
 def _check_period(loop, P):
     """Refuse a period that the loop's own sampling cannot tell from a wrap: a periodic coordinate
     whose step between neighbouring points of the (unwrapped) loop is a quarter period or more."""
-    step = np.max(np.abs(np.diff(loop, axis=0, append=loop[:1])), axis=0)
+    step = np.concatenate([np.max(np.abs(np.diff(loop[:, c:c + 512], axis=0, append=loop[:1, c:c + 512])), axis=0)
+                           for c in range(0, loop.shape[1], 512)])          # by blocks of columns: no whole-state temporary
     bad = np.flatnonzero((P > 0) & (step >= P / 4))
     if bad.size:
         i = int(bad[0])
@@ -746,11 +747,11 @@ def _defect_study(step, z, hs, probes, method, seed, progress, theta=None, perio
     that h; the order fitted over every level above the floor; ``below_floor_at_h``: true); a map that
     fails before any defect rises leaves "cannot tell at this h"; defects below the floor all the way
     up make it "symplectic"."""
-    def one(hk):
+    def one(hk, how=method):
         if progress:
             progress(hk)
         try:
-            return map_defect(step, z, hk, probes, method, seed, theta=theta, period=period)
+            return map_defect(step, z, hk, probes, how, seed, theta=theta, period=period)
         except Exception as exc:         # the user's map raised: a verdict, not a traceback
             return math.nan, f"none ({type(exc).__name__}: {exc})", "—"
 
@@ -771,14 +772,27 @@ def _defect_study(step, z, hs, probes, method, seed, progress, theta=None, perio
         verdict = "symplectic"
         up_h, up_v, up_f = [], [], []
         first = None                     # the first larger h whose defect is above the floor
+        # the larger steps by the levels' own method: a map differentiated by complex step at h is not
+        # judged at 64h by central differences, whose truncation on a map of few derivatives (a PIC
+        # step with spline shapes) reads as a defect
+        how = "complex step" if set(used) == {"complex step"} else method
+        span = abs(max(hs, key=abs)) / abs(min(hs, key=abs))
         for l in range(1, UPWARD + 1):
             hk = max(hs, key=abs) * 2.0 ** l
-            v, u, kind = one(hk)
+            v, u, kind = one(hk, how)
             if not math.isfinite(v):
                 if first is None:
-                    verdict = "cannot tell at this h"
-                    extra = {"reason": f"every defect is below the floor at h = {hs[-1]:g} … {hs[0]:g}, and the map "
-                                       f"fails at {hk:g}, so no larger step can show one"}
+                    why = ("fails" if how != "complex step" else "fails, or its complex evaluation is no longer its real "
+                           "one,")
+                    if span * 2.0 ** (l - 1) >= 2.0 ** UPWARD:    # below the floor over 64× in h: enough
+                        extra = {"upward": {"h": up_h, "defect": up_v},
+                                 "reason": f"every defect is below the floor from h = {hs[-1]:g} up to "
+                                           f"{(up_h or hs)[-1] if up_h else hs[0]:g} (the map {why} at {hk:g})"}
+                    else:
+                        verdict = "cannot tell at this h"
+                        extra = {"reason": f"every defect is below the floor at h = {hs[-1]:g} … {hs[0]:g}, and the "
+                                           f"map {why} at {hk:g}, so no larger step can show one"}
+                    first = -1.0         # (stopped; not a level above the floor)
                 break
             up_h.append(hk)
             up_v.append(v)
@@ -788,7 +802,9 @@ def _defect_study(step, z, hs, probes, method, seed, progress, theta=None, perio
                 first = hk
             if first is not None and sum(x > 10 * f for x, f in zip(up_v, up_f)) >= 3:
                 break                    # enough above the floor for an order
-        if first is not None:
+        if first == -1.0:
+            first = None
+        elif first is not None:
             verdict = "not symplectic"
             allh, allv = list(hs) + up_h, np.concatenate([arr, up_v])
             order = fit_order(allh, allv, max(floors.max(), max(up_f))) if np.all(np.isfinite(up_f)) else None
@@ -797,7 +813,7 @@ def _defect_study(step, z, hs, probes, method, seed, progress, theta=None, perio
                      "reason": f"every defect is below the floor at h = {hs[-1]:g} … {hs[0]:g}; at {first:g} it is "
                                f"{up_v[up_h.index(first)]:.2g}"
                                + (f", and it grows as h^{order:.2f}" if order is not None else "")}
-        elif verdict == "symplectic":
+        elif verdict == "symplectic" and "reason" not in extra:
             extra = {"upward": {"h": up_h, "defect": up_v},
                      "reason": f"every defect is below the floor from h = {hs[-1]:g} up to {up_h[-1]:g}"}
     order = fit_order(hs, arr, floors.max()) if np.all(np.isfinite(floors)) else None
