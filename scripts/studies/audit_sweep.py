@@ -3,6 +3,12 @@
     python scripts/studies/audit_sweep.py --json pic.json                 # the PIC at full size (~35 min on 2 cores)
     python scripts/studies/audit_sweep.py --particles 1024 --loop-points 4096 --json small.json
     python scripts/studies/audit_sweep.py --pendula 4096 --loop-points 4096 --json pendula.json
+    python scripts/studies/audit_sweep.py --invariant 2048 4096 [--peer DIR]  # I₁ alone, best of 3
+
+``--invariant D N``: the canonical I₁ with its monitor (whole, and as the audit sums it over blocks)
+on one loop of D periodic coordinates and N points; with ``--peer DIR`` (a checkout of
+github.com/wbarham/symplectic_diagnostic, run from its own environment's Python) its
+``LoopIntegral(N, period=L).compute`` on the same loop instead.
 
 A 1-D electrostatic PIC (integrators.audit.examples.pic: B-splines of degree 1, 2, 3, the field
 energy's exact gradient, a Landau start α = 0.01), Strang and RK2, ten step sizes dt = 2⁻¹ … 2⁻¹⁰,
@@ -61,6 +67,35 @@ def one(degree, particles, cells, loop_points, radius, pendula=None):
     return out
 
 
+def invariant_timing(D, N, peer=None):
+    """Wall and CPU seconds (best of 3 by wall) of I₁ on one loop: ours whole and blocked, or the peer's."""
+    L = 4 * np.pi
+    rng = np.random.default_rng(1)
+    pos, vel = rng.uniform(0, L, D), rng.standard_normal(D)
+    th = 2 * np.pi * np.arange(N) / N
+
+    def best(f):
+        out = []
+        for _ in range(3):
+            w, c = time.perf_counter(), time.process_time()
+            f()
+            out.append((time.perf_counter() - w, time.process_time() - c))
+        return min(out)
+    if peer:
+        sys.path.insert(0, str(peer))
+        from loop_integrals_par import LoopIntegral          # the peer's code, run, not copied
+        q, p = np.mod(pos[:, None] + np.sin(th)[None], L), vel[:, None] + np.cos(th)[None]
+        li = LoopIntegral(N, period=L)
+        return {"peer": best(lambda: li.compute(q, p))}
+    import invariants
+    from integrators.audit.maps import _blocked_first_invariant
+    x, v = np.mod(pos[None] + np.cos(th)[:, None], L), vel[None] + np.sin(th)[:, None]
+    P = np.full(D, L)
+    whole = lambda: invariants.first_invariant(x, "canonical", p=v, period=P)
+    whole()                                                   # compiled once before timing
+    return {"whole": best(whole), "blocked": best(lambda: _blocked_first_invariant(x, v, P))}
+
+
 def markdown(rows):
     lines = ["| degree | map | verdicts dt = 2⁻¹ … 2⁻¹⁰ | defect at 2⁻¹, 2⁻¹⁰ (order) | one-step e at 2⁻¹, 2⁻¹⁰ "
              "(order) | jumps found | wall · CPU | peak memory (state) |", "|---|---|---|---|---|---|---|---|"]
@@ -85,9 +120,15 @@ def main(argv=None):
     ap.add_argument("--radius", type=float, default=1.0)
     ap.add_argument("--degrees", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--pendula", type=int, default=None, help="the pendulum array of this many pendula instead")
+    ap.add_argument("--invariant", type=int, nargs=2, default=None, metavar=("D", "N"))
+    ap.add_argument("--peer", default=None, help="with --invariant: the peer's checkout instead of ours")
     ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)   # a child: one degree, JSON on stdout
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
+    if a.invariant:
+        for name, (w, c) in invariant_timing(*a.invariant, a.peer).items():
+            print(f"{name}: wall {w:.3f} s, CPU {c:.3f} s (D = {a.invariant[0]}, N = {a.invariant[1]})")
+        return
     if a.one is not None:
         print(json.dumps(one(a.one, a.particles, a.cells, a.loop_points, a.radius, a.pendula)))
         return
