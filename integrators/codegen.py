@@ -387,7 +387,10 @@ class CacheError(ValueError):
     """The engine's code cache ($POINCARE_CACHE) cannot be written: one line naming it."""
 
 
-def _load(system, precision="double"):
+def load_module(system, precision="double"):
+    """The generated module of ``system`` (``precision`` 'double' or 'double-double'): written to the
+    cache once (atomically, so MPI ranks generating together never see half a file), imported once per
+    process.  Its ``__file__`` is the generated source (the cost model reads its operations)."""
     key = getattr(system, "_engine_key", None)
     if key is None:
         key = system._engine_key = _key(system)       # (sympy's srepr of every expression: once)
@@ -418,7 +421,7 @@ def _load(system, precision="double"):
 
 def scalar_function(system):
     """The compiled ``scalars(q, k, out)`` of ``system``: out = [H(q), momentum(q) or 0]."""
-    return _load(system).scalars
+    return load_module(system).scalars
 
 
 def point_functions(system, complex_step=False, lanes=1, precision="double"):
@@ -432,16 +435,16 @@ def point_functions(system, complex_step=False, lanes=1, precision="double"):
         raise ValueError(f"lanes must be a lane width W (1, {LANES}{'' if precision == 'double-double' else f' or {WIDE}'}), "
                          f"got {lanes!r}")
     if precision == "double-double":
-        mod = _load(system, "double-double")
+        mod = load_module(system, "double-double")
         if lanes == 1:
-            return mod.evaluate_dd, _load(system).inside
+            return mod.evaluate_dd, load_module(system).inside
         if not hasattr(mod, "_lanes_dd"):
             try:
                 mod._lanes_dd = mod.lanes_dd()
             except Exception:       # a function without a lane form: the engine runs W = 1
                 mod._lanes_dd = None
-        return mod._lanes_dd, _load(system).inside
-    mod = _load(system)
+        return mod._lanes_dd, load_module(system).inside
+    mod = load_module(system)
     if lanes == WIDE:
         if not hasattr(mod, "_lanes_wide"):
             try:

@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .codegen import _load, point_functions
+from .codegen import load_module, point_functions
 from .projections import admission, projection_record
 
 BLOCK = 64                     # points per block of the kernel's thread loop (any value gives the same bits)
@@ -424,7 +424,7 @@ def scalars_dd(system, q2):
     out = np.zeros((q2.shape[0], 2, 2))
     k = system.param_vector()
     from .kernel import scalars_dd_points
-    scalars_dd_points(_load(system, "double-double").scalars_dd, k, q2, out)
+    scalars_dd_points(load_module(system, "double-double").scalars_dd, k, q2, out)
     return out
 
 

@@ -5,20 +5,14 @@ within the refresh floor (at every step, or on a schedule of step numbers) (inte
 _guess, _remember and _step).
 
 The iteration counts are the engine's arithmetic, not the machine's speed: they hold anywhere."""
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import integrators
 import invariants
-from integrators import kernel
+from integrators import costmodel, kernel
+from integrators.costmodel import newton_per_step
 from integrators.engine import FIXED_TOL
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts" / "studies"))
-from benchmarks_predictor import jacobian_flops  # noqa: E402  (the flop counts as coded)
-from engine_lanes import flops_per_iteration  # noqa: E402
 
 OLD = integrators.Tolerances(predictor="extrapolate", tol=FIXED_TOL)   # the engine's rule before the defects
 FIELDS = ("q", "p", "Lam", "iterations", "steps", "breakdown_time", "live", "defects", "orders", "have_lu")
@@ -26,27 +20,11 @@ FIELDS = ("q", "p", "Lam", "iterations", "steps", "breakdown_time", "live", "def
 
 def protocol_points(n=32):
     """Points near the default loop of the guiding centre (docs/benchmarks.md's protocol)."""
-    rng = np.random.default_rng(1)
-    q0 = invariants.loop("guiding_centre", n)
-    return q0 + 1e-3 * rng.standard_normal(q0.shape)
+    return costmodel.protocol_points(invariants.loop("guiding_centre", n))
 
 
 def iterations_per_step(tab, proj, q0, tolerances=None, steps=50, lanes=None):
     return newton_per_step(tab, proj, q0, tolerances, steps, lanes)[0]
-
-
-def newton_per_step(tab, proj, q0, tolerances=None, steps=50, lanes=None):
-    """Mean Newton iterations and Jacobians per point-step (the Jacobians per point with lanes=1),
-    and the Newton work: iterations + Jacobians × the pair's Jacobian in iterations, flops as
-    coded (scripts/studies/benchmarks_predictor.py --flops)."""
-    sy = integrators.system("guiding_centre_symmetric")
-    eng = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tolerances)
-    st = eng.state(q0)
-    use = eng.advance(st, 1, steps, lanes=lanes)
-    assert st.live.all()
-    its, jacs = st.iterations.sum() / st.steps.sum(), use.jacobians / st.steps.sum()
-    cost = jacobian_flops(sy, eng.tableau, eng) / flops_per_iteration(sy, eng.tableau, eng)
-    return its, jacs, its + cost * jacs
 
 
 FRESH = integrators.Tolerances(trust_max_unknowns=64)      # a Jacobian at every trusted guess

@@ -40,7 +40,6 @@ guiding_centre_symmetric, h = 10:
 import argparse
 import json
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -50,9 +49,10 @@ import integrators
 import invariants
 from integrators.engine import set_threads
 
+from integrators.costmodel import flops_per_iteration, jacobian_flops, newton_per_step, protocol_points
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "scripts" / "studies"))
-from engine_lanes import _ops, flops_per_iteration  # noqa: E402  (the count of one Newton iteration)
+LOOP32 = invariants.loop("guiding_centre", 32)            # the protocol's 32 points, before their offsets
 RULES = {"before": integrators.Tolerances(predictor="extrapolate"), "defects": integrators.Tolerances(),
          "schedule": integrators.Tolerances(jacobian_every=2), "other": None}
 PAIRS = (("GLRK1", "none"), ("GLRK2", "symmetric"), ("GLRK2", "standard"), ("SRK3", "symmetric"),
@@ -93,24 +93,6 @@ def iterations(sy):
         rows.append(row)
         print(row, flush=True)
     return rows
-
-
-def jacobian_flops(system, tableau, eng):
-    """The extra floating-point operations of a Jacobian as coded, over a residual evaluation: the
-    point function's second derivatives at each stage (and at the coupled projection's point), the
-    contractions K_i, the assembly of the nz × nz matrix and its LU (2nz³/3)."""
-    from integrators.codegen import _load
-    from integrators import kernel
-    body = Path(_load(system).__file__).read_text().split("def _evaluate_real")[1].split("def _evaluate_complex")[0]
-    need = body.split("if _need:")[1] if "if _need:" in body else ""
-    extra_ev = _ops([ln.replace("st(", "x = (") for ln in need.splitlines()
-                     if ln.startswith("        _x") or ln.startswith("        st(")])
-    s, d, nz = tableau.s, system.d, eng.nz
-    coupled = eng.plan.pre == kernel.PRE_UNKNOWN
-    evals = s + (1 if coupled else 0)
-    stage = s * (2 * d ** 3 + 2 * d * d) + s * s * d * d * (3 + 2 * s)
-    proj = d * d * (s * (3 + 2 * s) + 4 * s + 10) if coupled else 0
-    return evals * extra_ev + stage + proj + 2 * nz ** 3 // 3 + nz * nz
 
 
 def rate(e, q0, steps, lanes=None):
@@ -222,8 +204,6 @@ def trust_floor():
     them) and on 10⁴ points near the loop and spread over its box (50 steps from the start), and
     the protocol's iterations and Newton work (32 points, one a lane); the rule before issue 55
     (``predictor="extrapolate"``) beside them for scale."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    from test_predictor import newton_per_step, protocol_points
     sy = integrators.system("guiding_centre_symmetric")
     paper = np.concatenate([invariants.loop("guiding_centre", 2000),
                             invariants.surface("guiding_centre", 100, 100).reshape(-1, 4)])[::2]
@@ -235,7 +215,7 @@ def trust_floor():
                  for fl in (0.0, integrators.Tolerances().trust_floor)}
         rules["before issue 55"] = RULES["before"]
         for label, tol in rules.items():
-            its, _, work = newton_per_step(tab, proj, protocol_points(), tol, lanes=1)
+            its, _, work = newton_per_step(tab, proj, protocol_points(LOOP32), tol, lanes=1)
             e = integrators.Engine(sy, integrators.tableau(tab), proj, 10.0, tolerances=tol)
             speed = {}
             for name, (pts, steps) in sets.items():
@@ -269,8 +249,6 @@ def four_stages():
     points against a double-double run of the same method (max and median over the points); then
     point vortices (32 points near the convergence study's q₀, T = 2, h = 2⁻⁷ and 2⁻⁹), the error at
     T against double-double (median and max over the points) for 4 and 8 eps."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    from test_predictor import newton_per_step, protocol_points
     eps = np.finfo(np.float64).eps
     truth = double_double_q
     sy = integrators.system("guiding_centre_symmetric")
@@ -280,8 +258,8 @@ def four_stages():
         rules = {"before": integrators.Tolerances(predictor="extrapolate"),
                  **{f"{k} eps": integrators.Tolerances(tol=k * eps) for k in (4, 8, 16)}}
         for name, tol in rules.items():
-            its = newton_per_step(tab, "symmetric", protocol_points(), tol, lanes=1)[0]
-            orbit = newton_per_step(tab, "symmetric", protocol_points(3)[:1], tol, lanes=1)[0]
+            its = newton_per_step(tab, "symmetric", protocol_points(LOOP32), tol, lanes=1)[0]
+            orbit = newton_per_step(tab, "symmetric", protocol_points(invariants.loop("guiding_centre", 3))[:1], tol, lanes=1)[0]
             e = integrators.Engine(sy, integrators.tableau(tab), "symmetric", 10.0, tolerances=tol)
             st = e.state(q0)
             e.advance(st, 1, 300)

@@ -34,7 +34,8 @@ import numpy as np
 import integrators
 import invariants
 from integrators import kernel
-from integrators.codegen import _load, point_functions
+from integrators.codegen import point_functions
+from integrators.costmodel import flops_per_iteration
 from integrators.engine import _lagrange_matrix, set_threads
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -91,26 +92,6 @@ def _asm_here():
         packed, scalar = len(pat_p.findall(asm)), len(pat_s.findall(asm))
         out[len(arg("proto"))] = {"packed": packed, "scalar": scalar, "packed_share": packed / max(1, packed + scalar)}
     return out
-
-
-def _ops(lines):
-    return sum(len(re.findall(r"(?<![*(eE])[-+*/](?![*])", ln.split("=", 1)[1])) for ln in lines if "=" in ln)
-
-
-def flops_per_iteration(system, tableau, eng):
-    """Floating-point operations of one Newton iteration as coded (residual and solve; the Jacobian
-    and its factorisation, refreshed now and then, are left out)."""
-    src = _load(system).__file__
-    body = Path(src).read_text().split("def _evaluate_real")[1].split("def _evaluate_complex")[0]
-    light = [ln for ln in body.splitlines() if ln.startswith("    _x") or ln.startswith("    st(")]
-    ev = _ops([ln.replace("st(", "x = (") for ln in light])
-    s, d, nz = tableau.s, system.d, eng.nz
-    stages = s * (d * (4 * s) + ev + d * (2 * d) + 2 * d) + d * 8 * s          # Q, ϑ…, G, Σ b
-    rows = s * d * (4 * s + 3)                                                  # the stage residuals
-    coupled = eng.plan.pre == kernel.PRE_UNKNOWN
-    proj = (ev + 2 * d * d + 6 * d) if coupled else 0
-    solve = 2 * nz * nz + 4 * nz                                                # substitutions, update, norm
-    return stages + rows + proj + solve
 
 
 def output_vs_step(h=10.0, reps=30):

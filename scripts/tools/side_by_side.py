@@ -90,9 +90,8 @@ def measure(dump):
 
 def flops(tab, proj):
     """Flop of one step as coded, per point, at the measured iterations (filled in by the caller)."""
-    sys.path.insert(0, str(ROOT / "scripts" / "studies"))
     import integrators
-    from engine_lanes import flops_per_iteration
+    from integrators.costmodel import flops_per_iteration
     gc = integrators.system("guiding_centre_symmetric")
     t = integrators.tableau(tab)
     return flops_per_iteration(gc, t, integrators.Engine(gc, t, proj, 10.0))
