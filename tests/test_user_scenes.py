@@ -381,6 +381,30 @@ def test_the_builtin_canonical_map_scene_tells_strang_from_rk2(tmp_path):
     assert all(run[k].resolved["I1"].all() for k in run.pairs)
 
 
+
+def test_the_builtin_map_scenes_code_is_the_audit_examples_arithmetic():
+    """pendula_map.py is written as a user writes a scene's maps (plain numpy, importing nothing of the
+    package); its maps, energy and start are bitwise those of integrators.audit.examples."""
+    import importlib.util
+    from pathlib import Path
+
+    import integrators
+    from integrators.audit import examples
+    path = Path(integrators.__file__).parent / "service" / "scenes" / "pendula_map.py"
+    assert "integrators" not in "".join(ln for ln in path.read_text().splitlines(True) if "import" in ln)
+    spec = importlib.util.spec_from_file_location("pendula_map_scene", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    x0, v0 = mod.start()
+    _, info = examples.example("pendula-strang", k=mod.K)
+    assert np.array_equal(x0, info["point"][0]) and np.array_equal(v0, info["point"][1])
+    rng = np.random.default_rng(5)
+    x, v = x0 + 0.3 * rng.standard_normal((4, mod.K)), v0 + 0.3 * rng.standard_normal((4, mod.K))
+    for method in ("strang", "rk2"):
+        ours, ref = getattr(mod, method)(x, v, 0.1), examples.pendulum_array(mod.K, method=method)[0](x, v, 0.1)
+        assert np.array_equal(ours[0], ref[0]) and np.array_equal(ours[1], ref[1])
+    assert np.array_equal(mod.energy(x, v), info["energy"](x, v))
+
 ONE_FORM = '''import numpy as np
 
 def theta(q):                      # ϑ = (0, x + x³/3): dϑ = (1 + x²) dx ∧ dy
