@@ -124,3 +124,32 @@ def test_the_architecture_page_is_what_the_source_gives():
     assert "integrators.kernel" in rep["graph"] and len(rep["graph"]) > 20
     assert "| `integrators.kernel` |" in (ROOT / "docs" / "architecture.md").read_text()
     assert rep["page_is_current"], "run python scripts/tools/architecture.py"
+
+
+def test_tests_and_scripts_import_nothing_of_one_another():
+    """tests/ imports nothing from scripts/ (a test that needs a count the scripts use finds it in the
+    package: integrators.costmodel) and scripts/ nothing from tests/; a test runs a script as a
+    command.  Checked by the import names each tree's files use against the modules of the other,
+    and by any path either puts on sys.path or loads a file from."""
+    import ast
+    import re
+
+    def stems(folder):
+        return {p.stem for p in (ROOT / folder).rglob("*.py")}
+
+    def offences(folder, other, other_word):
+        own, theirs = stems(folder), stems(other) - stems(folder)
+        found = []
+        for path in (ROOT / folder).rglob("*.py"):
+            text = path.read_text()
+            for node in ast.walk(ast.parse(text)):
+                names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                    [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else []
+                found += [f"{path.relative_to(ROOT)} imports {n}" for n in names
+                          if n.split(".")[0] in theirs and n.split(".")[0] not in own]
+            for ln in text.splitlines():
+                if re.search(r"sys\.path|spec_from_file_location", ln) and re.search(rf"[\"']{other_word}[\"/']", ln):
+                    found.append(f"{path.relative_to(ROOT)}: {ln.strip()}")
+        return found
+    assert offences("tests", "scripts", "scripts") == []
+    assert offences("scripts", "tests", "tests") == []
