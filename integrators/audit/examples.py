@@ -10,9 +10,10 @@ returned wrapped into [0, P): the audit is told the period.
   by Strang splitting (kick–drift–kick: symplectic) or by the explicit midpoint rule RK2 (not).
 * :func:`pic`: a 1-D electrostatic particle-in-cell step of N electrons on a periodic domain of
   length L with a neutralising background: B-spline shape functions of degree 1 or 3 on M cells,
-  the field's energy ½ Σ_m ρ_m φ_m Δ with −φ'' = ρ solved spectrally, and the force on a particle
-  the exact gradient of that energy (the charge's shape function differentiated), so that the
-  splitting is symplectic; RK2 on the same force is not.
+  the field's energy ½ Σ_m ρ_m φ_m Δ with −φ'' = ρ solved spectrally or, with ``poisson="fem"``, by
+  Barham & Burby's finite-element Laplacian GᵀMG/Δ² (:func:`fem_laplacian_symbol`), and the force on
+  a particle the exact gradient of that energy (the charge's shape function differentiated), so that
+  the splitting is symplectic; RK2 on the same force is not.
 """
 from __future__ import annotations
 
@@ -29,15 +30,26 @@ def _wrap(x, period):
     return x - period * np.floor(np.real(x) / period)
 
 
+METHODS = {"strang": "Strang splitting", "rk2": "RK2", "heun": "Heun's RK2"}
+
+
 def _integrator(accel, period, method):
-    """step(x, v, h) of ẍ = accel(x): Strang splitting (kick ½h, drift h, kick ½h: symplectic) or the
-    explicit midpoint rule RK2 (not); positions wrapped into [0, period)."""
+    """step(x, v, h) of ẍ = accel(x): Strang splitting (kick ½h, drift h, kick ½h: symplectic), the
+    explicit midpoint rule RK2 (not), or Heun's trapezoidal RK2 (not; the second-order method of
+    Barham & Burby's study); positions wrapped into [0, period)."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     if method == "strang":
         def step(x, v, h):
             v = v + 0.5 * h * accel(x)
             x = x + h * v
             v = v + 0.5 * h * accel(x)
             return _wrap(x, period), v
+    elif method == "heun":
+        def step(x, v, h):
+            a0 = accel(x)
+            x1, v1 = _wrap(x + h * v, period), v + h * a0
+            return _wrap(x + 0.5 * h * (v + v1), period), v + 0.5 * h * (a0 + accel(x1))
     else:
         def step(x, v, h):
             xm = x + 0.5 * h * v
@@ -47,9 +59,8 @@ def _integrator(accel, period, method):
 
 
 def pendulum_array(k=1024, coupling=0.5, method="strang"):
-    """A ring of k coupled pendula (positions: angles, period 2π): (step, info)."""
-    if method not in ("strang", "rk2"):
-        raise ValueError(f"method must be 'strang' or 'rk2', got {method!r}")
+    """A ring of k coupled pendula (positions: angles, period 2π): (step, info); ``method`` one of
+    :data:`METHODS`."""
     c = float(coupling)
 
     def force(x):
@@ -65,7 +76,7 @@ def pendulum_array(k=1024, coupling=0.5, method="strang"):
 
     step.__name__ = f"pendula_{method}"
     return step, dict(k=k, period=TWO_PI, energy=energy, method=method,
-                      what=f"{k} pendula on a ring, coupling {c:g}, {'Strang splitting' if method == 'strang' else 'RK2'}")
+                      what=f"{k} pendula on a ring, coupling {c:g}, {METHODS[method]}")
 
 
 def landau_start(N, L, alpha=0.01, mode=1, seed=1):
@@ -98,19 +109,51 @@ def bspline_shape(x, dx, M, degree):
         (-g * g / 2, (3 * f2 - 4 * f) / 2, (-3 * f2 + 2 * f + 1) / 2, f2 / 2)
 
 
-def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"):
+# The mass matrix of the periodic B-splines of degree p − 1 on unit cells (the space of φ' when φ is
+# in degree p), as its stencil's symbol m(θ) = Σ_o c_o cos(oθ): degree 0 the identity, degree 1
+# (1/6, 2/3, 1/6), degree 2 (1/120, 13/60, 11/20, 13/60, 1/120).
+_MASS_STENCIL = {1: (1.0,), 2: (2 / 3, 1 / 6), 3: (11 / 20, 13 / 60, 1 / 120)}
+
+
+def fem_laplacian_symbol(cells, dx, degree):
+    """The eigenvalues λ_m, m = 0 … M//2, of the periodic finite-element Laplacian K = GᵀMG/Δ² for
+    B-splines of ``degree`` on M ``cells`` (G the forward difference, M the mass matrix of the
+    splines of one degree less: Barham & Burby's ``construct_laplacian``): K is circulant, so
+    λ_m = 2(1 − cos θ_m) m(θ_m)/Δ² with θ_m = 2πm/M and m(θ) the mass stencil's symbol.  λ_0 = 0
+    (the mean of φ is set to zero); as M → ∞ at fixed wave number, λ_m → k_m²."""
+    theta = TWO_PI * np.arange(cells // 2 + 1) / cells
+    stencil = _MASS_STENCIL[degree]
+    mass = stencil[0] + sum(2 * c * np.cos(o * theta) for o, c in enumerate(stencil[1:], 1))
+    return 2 * (1 - np.cos(theta)) * mass / dx ** 2
+
+
+def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang", poisson="spectral"):
     """A 1-D electrostatic PIC step (electrons, charge −1 and mass 1 in total, ions a fixed background):
-    (step, info).  Positions on [0, L) (period L); ``degree`` 1, 2 or 3; ``method`` 'strang' or 'rk2'."""
+    (step, info).  Positions on [0, L) (period L); ``degree`` 1, 2 or 3; ``method`` 'strang', 'rk2' or
+    'heun' (:data:`METHODS`);
+    ``poisson`` 'spectral' (−φ'' = ρ by Fourier modes, 1/k²) or 'fem' (the finite-element Laplacian
+    GᵀMG/Δ² of Barham & Burby's study, solved through its circulant symbol,
+    :func:`fem_laplacian_symbol`).  Either operator is symmetric, so the force stays the exact
+    gradient of the field energy and Strang stays symplectic.
+
+    Convention: a particle's shape of degree 2 is centred on its node (node m's spline on
+    [X_m − 3Δ/2, X_m + 3Δ/2]); the study's code centres it half a cell to the right, a translation of
+    the grid by Δ/2 that changes the start's sampled field, not the verdicts."""
     if degree not in (1, 2, 3):
         raise ValueError(f"degree must be 1, 2 or 3, got {degree!r}")
-    if method not in ("strang", "rk2"):
-        raise ValueError(f"method must be 'strang' or 'rk2', got {method!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    if poisson not in ("spectral", "fem"):
+        raise ValueError(f"poisson must be 'spectral' or 'fem', got {poisson!r}")
     N, M, L = int(particles), int(cells), float(length)
     dx = L / M
     q_p = -L / N                          # charge per particle: total −L against a background of +1
-    kk = TWO_PI * np.fft.rfftfreq(M, d=dx)
-    inv_k2 = np.zeros_like(kk)
-    inv_k2[1:] = 1.0 / kk[1:] ** 2
+    if poisson == "spectral":
+        lam = (TWO_PI * np.fft.rfftfreq(M, d=dx)) ** 2
+    else:
+        lam = fem_laplacian_symbol(M, dx, degree)
+    inv_k2 = np.zeros_like(lam)
+    inv_k2[1:] = 1.0 / lam[1:]
     offsets = {1: (0, 1), 2: (-1, 0, 1), 3: (-1, 0, 1, 2)}[degree]   # the nodes a particle's shape touches, from j
     E = M + 3                             # nodes with ghosts: node m of the support at column m + 1
 
@@ -137,7 +180,7 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
     def potential(x, shape=None):
         """φ at the nodes for each row of particle positions x (n, N): (n, M)."""
         rho = _deposit(x, shape) + 1.0                # the ions' background
-        solve = lambda r: np.fft.irfft(np.fft.rfft(r, axis=1) * inv_k2, n=M, axis=1)   # −φ'' = ρ, mean zero
+        solve = lambda r: np.fft.irfft(np.fft.rfft(r, axis=1) * inv_k2, n=M, axis=1)   # Kφ = ρ, mean zero
         if np.iscomplexobj(rho):                      # complex step: the (linear) solve of each part
             return solve(rho.real) + 1j * solve(rho.imag)
         return solve(rho)
@@ -168,10 +211,11 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
         return (-q_p) * 0.5 * np.sum(np.atleast_2d(v) ** 2, axis=-1) + field
 
     step.__name__ = f"pic_{method}_deg{degree}"
-    return step, dict(k=N, period=L, energy=energy, method=method, degree=degree,
+    return step, dict(k=N, period=L, energy=energy, method=method, degree=degree, poisson=poisson,
                       landau=lambda alpha=0.01, mode=1, seed=1: landau_start(N, L, alpha, mode, seed),
                       what=f"1-D electrostatic PIC, {N} particles, {M} cells, B-splines of degree {degree}, "
-                           f"{'Strang splitting' if method == 'strang' else 'RK2'}")
+                           f"{METHODS[method]}"
+                           f"{', finite-element Poisson solve' if poisson == 'fem' else ''}")
 
 
 EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2", "pic2-strang",
