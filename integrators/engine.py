@@ -289,15 +289,12 @@ class Tolerances:
         iterations it saves, so those pairs keep the carried factors (docs/benchmarks.md)
     refresh_floor : no fresh Jacobian after an update of at most this size (relative, like tol),
         however little it contracted: that small, the ratio measures round-off, not the factors
-        (default 1e-12, about 4,500 ulps; ``"defects"`` only: the other predictors keep the rule
-        before, bitwise; scaled to double-double like tol)
+        (default 1e-12, about 4,500 ulps; ``"defects"`` only: the other predictors refresh after
+        every poorly contracting iteration; scaled to double-double like tol)
     trust_floor : ... and no Jacobian at a guess within this either (default 1e-7; 0: the refresh
-        floor alone, the rule before it, bitwise).  The unprojected and symplectically projected
-        pairs' guesses end near 10⁻⁸ on long runs, where the carried factors converge in three or
-        four iterations and a Jacobian at every step costs more: on paper_poincare's points GLRK2-
-        and SRK3-none and -symplectic run 1.1-1.24x faster with it, 50 steps from the start on points
-        spread over a box GLRK2-none and -symplectic 0.87-0.90x (still 1.17-1.24x the rule before issue
-        55; docs/benchmarks.md)
+        floor alone).  The unprojected and symplectically projected pairs' guesses end near 10⁻⁸ on
+        long runs, where the carried factors converge in three or four iterations and a Jacobian at
+        every step costs more than it saves (docs/benchmarks.md, "The stage predictor")
     refresh_horizon : ... and only where those factors, at the rate θ of that iteration, would not
         converge within this many more iterations (θ^horizon·|δ| > tol).  Default 0: no such test;
         -1: 2 + ⌈unknowns / 4⌉, about a Jacobian's cost in iterations plus the two it takes after
@@ -709,8 +706,9 @@ def predictor(c, kind="extrapolate"):
 
 def _lagrange_matrix(nodes, targets):
     """E with E_ij = ℓ_j(targets_i) for the Lagrange basis on ``nodes``: the next step's stage guess
-    from the last step's stage values (nodes c_j − 1 extrapolated to c_i).  (Extrapolating from two
-    steps was tried: no gain for s ≥ 2, and it wrecks the guess for SRK3.)"""
+    from the last step's stage values (nodes c_j − 1 extrapolated to c_i).  One step's stages only:
+    extrapolating from two steps gains nothing for s ≥ 2 and spoils the guess for SRK3
+    (docs/benchmarks-history.md)."""
     E = np.ones((len(targets), len(nodes)))
     for i, x in enumerate(targets):
         for j, xj in enumerate(nodes):

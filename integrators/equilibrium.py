@@ -1,4 +1,4 @@
-"""Guiding centres in a tokamak equilibrium read from a G-EQDSK file (issue 44).
+"""Guiding centres in a tokamak equilibrium read from a G-EQDSK file.
 
 :func:`system_from_geqdsk` turns a G-EQDSK file (EFIT, CHEASE, FreeGS, TokaMaker … write them: the
 poloidal flux ψ(R, Z) on a grid, F(ψ) = R B_φ on a grid in ψ, the boundary) into a

@@ -724,7 +724,7 @@ def _judge(f, F, tol, stall, refresh, floor, horizon, least):
     guess 2, because at small steps that guess is often within tol already, and taking it, not the
     iterate after it, left its extrapolation error, a few ulps of the same sign, in every step:
     SRK3-standard on point vortices at h = 2⁻¹³, 16,384 steps, momentum off by 1.0·10⁻¹³ against
-    the old rule's 4.6·10⁻¹⁵) or on, with a fresh Jacobian next time if this
+    4.6·10⁻¹⁵ from the extrapolation alone) or on, with a fresh Jacobian next time if this
     iteration contracted by θ > ``refresh``, its update was larger than ``floor`` (an update a few
     thousand ulps small measures round-off, not the factors: a Jacobian there was the engine's
     largest waste on high-order pairs, docs/benchmarks.md) and θ^horizon·|δ| > tol: the factors
@@ -1183,14 +1183,14 @@ def _step(t_next, n0, ev, inside, P, d, s, nz, g):
     The guess (:func:`_guess`): the last step's stages extrapolated, corrected by the last steps'
     defects (``cfg.depth`` of them; none under ``predictor="extrapolate"``).  A step is tried from
     up to three starts before a lane breaks down: (0) the guess, with a Jacobian taken there where
-    the lane trusts it (``F.trust``; never where ``cfg.trust`` < 0: the old rule, and pairs above
+    the lane trusts it (``F.trust``; never where ``cfg.trust`` < 0: ``predictor="extrapolate"``, and pairs above
     ``Tolerances.trust_max_unknowns``) and the step is due (its number, ``n0`` + ``F.jn``, a
     multiple of ``cfg.every``: a schedule by step number, not by the lane's own history, so the
     lanes of a group take their Jacobians at the same steps wherever their points lie), else with
     the factors carried from the last step; if that
     fails, (1) the uncorrected base guess with the other choice (a Jacobian there when none are
-    carried; under the old rule the base is the guess, so this is its "same guess, fresh
-    Jacobian"); then (2) h·q̇(q_n) at every stage, μ = 0, with a Jacobian taken there.  A first
+    carried; under ``predictor="extrapolate"`` the base is the guess, so this is the same guess
+    with a fresh Jacobian); then (2) h·q̇(q_n) at every stage, μ = 0, with a Jacobian taken there.  A first
     step starts at (2).  A lane whose last try fails (Newton does not converge, a value is not
     finite, q leaves the domain) is frozen at its last good state with its breakdown time set to
     ``t_next``.  Each further try is the lane's next call of this

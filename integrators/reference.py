@@ -4,8 +4,7 @@ The same equations as the compiled engine (integrators/projections.py, eq:vprk_1
 eq:vprk_lobatto and each projection's eq:…_pre / eq:…_post), written plainly with batched numpy
 arrays: Newton with a per-point convergence mask and inverse Jacobians carried across steps, the
 projections read from the same records as the kernel's (:func:`integrators.projections.projection_record`:
-where ϑ_q is taken, σ, what is solved together; no branch on a projection's name).  It ran every
-pair before the compiled engine; now it is
+where ϑ_q is taken, σ, what is solved together; no branch on a projection's name).  It is
 
 * **the tests' independent oracle** of the compiled engine (tests/test_engine.py: 16 ulps after
   one step on every admissible pair of three systems, the same breakdowns, long runs that track
@@ -261,8 +260,8 @@ def newton(fun, z0, scale, *, tol=None, stall=None, maxiter=40, refresh=None, ji
 def _progress(delta, za, scale, prev, tol, stall, complex_step):
     """(size of the update relative to scale, contraction θ against the last, converged, failed)
     per row.  Converged: the update is below tol, or a round-off floor is reached (below stall and
-    no longer halving).  (Stopping on the error predicted from the contraction, θ/(1 − θ)·|δ|, left
-    constraint errors of 1e-12.)"""
+    no longer halving).  Not on the error predicted from the contraction, θ/(1 − θ)·|δ|: that
+    stops early enough to leave constraint errors of 1e-12."""
     size = np.max(np.abs(delta.real) / scale, axis=1)
     if complex_step:       # the derivative (imaginary part) must converge too, to its own scale
         size = np.maximum(size, np.max(np.abs(delta.imag) / (COMPLEX_STEP * scale), axis=1))
@@ -347,9 +346,9 @@ class Stepper:
         self.s, self.d = s, d
         self.nz = (s + (1 if self.coupled else 0) + (1 if self.lobatto else 0)) * d
         # Lagrange extrapolation of the last step's stage values (nodes c_j − 1) to the next
-        # step's nodes c_i.  (Extrapolating from two steps, degree 2s − 1, was tried: it gains
-        # nothing for s ≥ 2, whose stage values carry an O(h^{s+1}) error of their own, and
-        # its amplification wrecks the guess for SRK3.)
+        # step's nodes c_i, from one step only: two steps (degree 2s − 1) gain nothing for s ≥ 2,
+        # whose stage values carry an O(h^{s+1}) error of their own, and their amplification
+        # spoils the guess for SRK3.
         self.extrapolation = _lagrange_matrix(tableau.c - 1.0, tableau.c)
 
     # -- initial guesses --------------------------------------------------------

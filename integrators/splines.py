@@ -1,4 +1,4 @@
-"""Quintic tensor splines on a regular (R, Z) grid, as symbols a system's ϑ and H can use (issue 44).
+"""Quintic tensor splines on a regular (R, Z) grid, as symbols a system's ϑ and H can use.
 
 A field given on a grid (the poloidal flux ψ(R, Z) of an equilibrium file, or a potential built
 from it) becomes the quintic interpolating tensor spline of its values (scipy's not-a-knot

@@ -58,7 +58,7 @@ def band_limited_loop(n, center, modes=20, decay=0.7, scale=None, seed=1):
     q(τ) = center + Σ_k (a_k cos 2πkτ + b_k sin 2πkτ), a_k, b_k normal with standard deviations
     ``scale``·decay^k (``scale``: one number per coordinate, default 0.05 each) from
     numpy's generator of ``seed``.  Smooth and band-limited: q's own top modes are zero for any n >
-    2·modes, while a one-form of q reaches further; the resolution monitor's test set (issue 57)."""
+    2·modes, while a one-form of q reaches further; the resolution monitor's test set."""
     center = np.asarray(center, dtype=float)
     d = center.size
     scale = np.full(d, 0.05) if scale is None else np.asarray(scale, dtype=float)

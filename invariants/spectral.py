@@ -301,7 +301,7 @@ def loop_pairing_error(ah, bh, N, absolute=None, tails=False, model=(True, True)
     The sampled coefficients of a are aliased: â_k = a_k + a_{k−N} + a_{k+N} + …, so the discrete
     sum Σ 2πik conj(â_k) b̂_k carries the products k·b_k·a_{N−k} and k·a_k·b_{N−k} of each mode with
     the mode N − k of the other factor, and misses the modes beyond K.  The product ϑ(q)·q′ reaches
-    modes several times further than q (issue 57: a band-limited q, modes 1 … 20, gives I₁ wrong by
+    modes several times further than q (a band-limited q, modes 1 … 20, gives I₁ wrong by
     1e-6 on 64 points while q's own top modes are zero), so this looks at both factors' spectra:
     with each factor's modes beyond K estimated by :func:`tail_model`,
 

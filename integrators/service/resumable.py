@@ -72,7 +72,7 @@ def _check_pairs(f, runs, scene, limit, State):
         if str(g.attrs.get("status", "")) not in STATUSES:
             raise damaged(f"{g.name} has the status {g.attrs.get('status')!r}")
         older = [k for k in STATE_FIELDS if "checkpoint/a" in g and k not in g["checkpoint/a"]]
-        if older and all(k in NOTED_SINCE_ISSUE_56 for k in older):
+        if older and all(k in RESUME_BITS_FIELDS for k in older):
             raise DamagedFile(f"'{path}' was written by an earlier version, whose checkpoints do not note where "
                               f"Newton's factors were taken or what the predictor learnt ({', '.join(older)}): a resume "
                               "could not give the bits of "
@@ -126,8 +126,10 @@ def _check_pairs(f, runs, scene, limit, State):
                     raise damaged(f"{ds.name} has shape {ds.shape} and type {ds.dtype}")
 
 
-NOTED_SINCE_ISSUE_56 = ("have_lu", "jac_z", "jac_q", "jac_lam",   # checkpoint fields added then,
-                        "defects", "orders")                      # and the predictor's (issue 55)
+# The checkpoint fields without which a resume cannot give the bits of the run it continues (where
+# Newton's factors were taken, and what the stage predictor has learnt): a file that lacks only these
+# was written by an earlier version, and is refused for resuming with that reason.
+RESUME_BITS_FIELDS = ("have_lu", "jac_z", "jac_q", "jac_lam", "defects", "orders")
 
 
 def open_for_resume(path):
