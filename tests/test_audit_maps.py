@@ -391,6 +391,7 @@ def test_a_sweep_of_step_sizes_in_one_call_with_one_i0(monkeypatch):
     assert "below the floor at this h" in c["rk2"]["verdicts"][-1]["reason"]
     assert abs(d["order"] - 3) < 0.3
     assert min(c["rk2"]["one_step"]["error"][:8]) > 1e-11
+    assert abs(c["rk2"]["one_step"]["order"] - 3) < 0.3        # e(h) ~ h³, fitted at the small steps
     assert rep["sweep"]["mode"] == "one step" and "over 12 step sizes" in text_report(rep)
     assert "one-step I₁ error order" in text_report(rep)
 

@@ -125,6 +125,18 @@ def fit_order(hs, values, floor):
     return float(np.polyfit(np.log(np.abs(hs[keep])), np.log(v[keep]), 1)[0])
 
 
+def fit_order_small_h(hs, values, floor, levels=3):
+    """Slope of log(value) against log(h) over the ``levels`` smallest h whose values are above 10 ×
+    floor (None if < 3 such): the asymptotic order of a quantity that is not monotone at large h (a
+    one-step error |I(h) − I(0)| changes sign where h is far from the asymptotic range)."""
+    hs, v = np.asarray(hs, float), np.asarray(values, float)
+    keep = np.flatnonzero(np.isfinite(v) & (v > 10 * floor))
+    keep = keep[np.argsort(np.abs(hs[keep]))][:levels]
+    if len(keep) < 3:
+        return None
+    return float(np.polyfit(np.log(np.abs(hs[keep])), np.log(v[keep]), 1)[0])
+
+
 def defect_study(step, system, q, h, levels=5, method="auto", reads=None):
     """Defects for h·2^-k, k < levels: {form: {'h', 'defect', 'order', 'verdict'}}, and the method(s).
 

@@ -25,7 +25,7 @@ import warnings
 import numpy as np
 
 from ..kernel import COMPLEX_STEP as CS_STEP
-from .defect import DEFECT_FLOOR, FD_ORDER8, FD_STEP, fit_order
+from .defect import DEFECT_FLOOR, FD_ORDER8, FD_STEP, fit_order, fit_order_small_h
 from .drift import ROUNDOFF, RESOLVED, drift_verdict
 from invariants.forms import MIN_POINTS
 
@@ -610,7 +610,7 @@ def _sweep_entry(name, form, hs, runs, defect, jacobian, steps):
         # the floor at each h: round-off, or the two values' own uncertainty (error + round-off) if larger
         floors = [max(ROUNDOFF, (r["uncertainty"][key][0] + r["uncertainty"][key][-1]) / abs(r["drift"][key]["value_at_start"]))
                   if key in r.get("uncertainty", {}) and r["drift"][key]["value_at_start"] else ROUNDOFF for r in runs]
-        order = fit_order(hs, e_arr, max(floors))
+        order = fit_order_small_h(hs, e_arr, max(floors))   # |I(h) − I(0)| can change sign at large h
         above = [x > f and rr <= RESOLVED for x, rr, f in zip(e, res, floors)]
         verdicts = []
         for x, rr, f in zip(e, res, floors):

@@ -78,6 +78,7 @@ def one(degree, particles, cells, loop_points, radius, pendula=None, poisson="sp
             "h": HS, "verdict": [v["verdict"] for v in c["verdicts"]],
             "defect": [d["defect"][d["h"].index(h)] for h in HS], "defect_order": d["order"],
             "one_step_error": c["one_step"]["error"], "one_step_order": c["one_step"]["order"],
+            "one_step_floor": c["one_step"]["floor"],
             "jumps": [len(r["discontinuity"]["jumps"]) if r["discontinuity"] else None for r in c["runs"]]}
     return out
 
