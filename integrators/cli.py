@@ -365,6 +365,8 @@ def _map_audit(args):
     if shipped and args.theta is not None:
         raise ValueError(f"--theta takes noncanonical maps step(q, h) -> q of your own; '{shipped[0]}' is a "
                          "shipped canonical example")
+    if args.poisson is not None and not any(sp.startswith("pic") for sp in shipped):
+        raise ValueError("--poisson applies to the shipped PIC examples (pic-…, pic1-…, pic2-…)")
     if args.k is not None and not shipped:
         raise ValueError("--k sizes the shipped examples (" + ", ".join(_EXAMPLE_NAMES) + "), not a map of your own")
     ex = examples.defaults(shipped[0], args.k) if shipped else None
@@ -392,7 +394,8 @@ def _map_audit(args):
     maps, info = {}, None
     for spec in args.map:
         if spec in examples.EXAMPLES:
-            step, info_k = examples.example(spec, args.k)
+            step, info_k = examples.example(spec, args.k, **({"poisson": args.poisson}
+                                                              if args.poisson and spec.startswith("pic") else {}))
             info = info or info_k
         else:
             step = load_callable(spec, "step map", confined=False)
@@ -486,8 +489,8 @@ def _audit_outputs(report, args) -> int:
     return 0
 
 
-_EXAMPLE_NAMES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2", "pic2-strang",
-                  "pic2-rk2")   # audit.examples.EXAMPLES
+_EXAMPLE_NAMES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic-heun", "pic1-strang", "pic1-rk2",
+                  "pic1-heun", "pic2-strang", "pic2-rk2", "pic2-heun")   # audit.examples.EXAMPLES
 
 
 def _check_writable(path, option, file):
@@ -591,6 +594,9 @@ def build_parser():
                                     "arrays x0 and v0, or file.py:function returning them (examples: their own)")
     mp.add_argument("--k", type=int, default=None,
                     help="size of a shipped example: pendula (default 1024) or particles (default 10000)")
+    mp.add_argument("--poisson", choices=("spectral", "fem"), default=None,
+                    help="the PIC examples' Poisson solve: spectral (default) or fem, the finite-element "
+                         "Laplacian of Barham & Burby's study")
     mp.add_argument("--h", type=float, nargs="+", default=None,
                     help="step size (examples: theirs); several: a sweep, one report over all of them")
     mp.add_argument("--period", type=float, nargs="+", default=None,

@@ -218,8 +218,8 @@ def pic(particles=10000, cells=64, length=4 * math.pi, degree=3, method="strang"
                            f"{', finite-element Poisson solve' if poisson == 'fem' else ''}")
 
 
-EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic1-strang", "pic1-rk2", "pic2-strang",
-            "pic2-rk2")
+EXAMPLES = ("pendula-strang", "pendula-rk2", "pic-strang", "pic-rk2", "pic-heun", "pic1-strang", "pic1-rk2",
+            "pic1-heun", "pic2-strang", "pic2-rk2", "pic2-heun")
 
 
 def defaults(name, k=None):
@@ -234,9 +234,10 @@ def defaults(name, k=None):
     return {"k": k, "h": 0.1, "radius": 0.01 if family == "pendula" else 0.1}
 
 
-def example(name, k=None):
+def example(name, k=None, poisson="spectral"):
     """A shipped example by name (:data:`EXAMPLES`): (step, info) with info's ``point`` (x0, v0), ``h``
-    and ``period`` the audit's defaults.  ``k``: pendula (default 1,024) or particles (default 10,000).
+    and ``period`` the audit's defaults.  ``k``: pendula (default 1,024) or particles (default 10,000);
+    ``poisson``: the PIC's Poisson solve, 'spectral' or 'fem' (the study's, :func:`pic`).
 
     pendula: angles uniform in [0, 2π) and momenta normal with deviation 0.5 (numpy's generator of
     seed 1), h = 0.1, loop radius 0.01 (at 0.1 the loop of 4,096 pendula stretches out of resolution
@@ -244,12 +245,14 @@ def example(name, k=None):
     (quadratic) and pic1 (linear): 64 cells on [0, 4π), a Landau-damping start (α = 0.01, mode 1), h = 0.1, radius 0.1."""
     family, method = name.split("-")
     k = defaults(name, k)["k"]
+    if family == "pendula" and poisson != "spectral":
+        raise ValueError(f"poisson applies to the PIC examples, not to '{name}'")
     if family == "pendula":
         step, info = pendulum_array(k, method=method)
         rng = np.random.default_rng(1)
         info["point"] = (rng.uniform(0.0, TWO_PI, k), 0.5 * rng.standard_normal(k))
     else:
-        step, info = pic(particles=k, degree={"pic": 3, "pic1": 1, "pic2": 2}[family], method=method)
+        step, info = pic(particles=k, degree={"pic": 3, "pic1": 1, "pic2": 2}[family], method=method, poisson=poisson)
         info["point"] = info["landau"]()
     info.update({key: v for key, v in defaults(name, k).items() if key != "k"})   # pendula: radius 0.01 (docstring)
     return step, info
