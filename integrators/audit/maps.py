@@ -101,7 +101,7 @@ def check_arguments(n, h, *, steps=100, output_every=None, loop_points=1024, rad
     if noncanonical and surface is not None:
         needs[f"the surface's two-form ({surface[0] * surface[1]:,} points of {n} × {n})"] = \
             4 * 8.0 * surface[0] * surface[1] * n * n
-    from ..service.scene import available_memory
+    from ..service.scene_checks import available_memory
     free = available_memory()
     what, need = max(needs.items(), key=lambda kv: kv[1])
     fewer = (f"fewer {nm['defect_points']}" if "defect" in what else
