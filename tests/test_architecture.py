@@ -157,14 +157,14 @@ def test_tests_and_scripts_import_nothing_of_one_another():
 
 def test_pages_and_docstrings_state_today():
     """docs/benchmarks.md states today's figures on at most 300 lines with no commit hash or issue
-    number (how they came about is in docs/benchmarks-history.md), and no module of the two packages
-    cites an issue number or a constant named after one: docstrings state contracts and reasons."""
+    number (how they came about is in docs/benchmarks-history.md), and no module or built-in scene of
+    the two packages cites an issue number or a constant named after one: docstrings state contracts and reasons."""
     import re
     page = (ROOT / "docs" / "benchmarks.md").read_text()
     assert len(page.splitlines()) <= 300
     assert re.findall(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b", page) == []
     assert re.findall(r"[Ii]ssue \d+", page) == []
     cited = [f"{p.relative_to(ROOT)}: {m}" for folder in ("integrators", "invariants")
-             for p in (ROOT / folder).rglob("*.py")
+             for p in [*(ROOT / folder).rglob("*.py"), *(ROOT / folder).rglob("*.toml")]
              for m in re.findall(r"[Ii]ssue[ _]\d+|ISSUE_\d+", p.read_text())]
     assert cited == []
