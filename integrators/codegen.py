@@ -78,6 +78,7 @@ def _key(system) -> str:
         # the generated module compiles integrators/splines.py's evaluation into its own functions,
         # and numba's cache checks only the module's file: a changed splines.py is a new key
         parts.append(Path(__file__).with_name("splines.py").read_text())
+        parts.append(Path(__file__).with_name("splines3.py").read_text())
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
 
 
@@ -129,16 +130,27 @@ class _DDPrinter:
         return cls._cls(names)
 
 
+def _field_call(data, P):
+    """The generated code's call of a spline field's evaluation: ``field1``, ``field`` or ``field3`` (1-, 2-, 3-D)
+    on the data ``data`` after ``P`` parameters."""
+    def call(s, *X):
+        return f"{('field1', 'field', 'field3')[len(X) - 1]}({data}, {P}, {s}, {', '.join(X)})"
+    return call
+
+
 def field_prelude(exprs, qsyms, params, indent, call):
-    """The spline fields (:class:`integrators.splines.Field`) in ``exprs`` as plain symbols:
-    returns (the expressions with each ∂ᵃ_R ∂ᵇ_Z f_s(X, Y) replaced by a symbol, the lines that
-    evaluate each field once with all its derivatives up to order 3, {symbol: name}).  ``call``
-    formats the evaluation: ``call(s, X, Y)`` with X, Y printed.  No fields: the expressions
-    unchanged and no lines."""
+    """The spline fields (:class:`integrators.splines.Field1`, :class:`~integrators.splines.Field`,
+    :class:`integrators.splines3.Field3`) in
+    ``exprs`` as plain symbols: returns (the expressions with each derivative of a field at its
+    point replaced by a symbol, the lines that evaluate each field at each point once with all the
+    derivatives its evaluation returns, {symbol: name}).  ``call`` formats the evaluation:
+    ``call(s, X)``, ``call(s, X, Y)`` or ``call(s, X, Y, Z)`` with the coordinates printed.  No fields: the
+    expressions unchanged and no lines."""
     import sympy
-    from .splines import DERIVATIVES, Field
+    from .splines import DERIVATIVES, DERIVATIVES1, Field, Field1
+    from .splines3 import DERIVATIVES3, Field3
     exprs = list(exprs)
-    atoms = set().union(*(e.atoms(Field) for e in exprs)) if exprs else set()
+    atoms = set().union(*(e.atoms(Field1, Field, Field3) for e in exprs)) if exprs else set()
     if not atoms:
         return exprs, [], {}
     names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
@@ -147,19 +159,24 @@ def field_prelude(exprs, qsyms, params, indent, call):
     groups, subst, fnames, lines = {}, {}, {}, []
     pad = " " * indent
     for atom in sorted(atoms, key=sympy.default_sort_key):
-        X, Y, s_, a, b = atom.args
-        if (int(a), int(b)) not in DERIVATIVES:
-            raise ValueError(f"field {int(s_)}: a derivative of order {int(a) + int(b)} (at most 3 are evaluated)")
-        key = (X, Y, int(s_))
+        dim = 3 if isinstance(atom, Field3) else 1 if isinstance(atom, Field1) else 2
+        coords, s_, orders = atom.args[:dim], int(atom.args[dim]), tuple(int(o) for o in atom.args[dim + 1:])
+        table = {1: tuple((a,) for a in DERIVATIVES1), 2: DERIVATIVES, 3: DERIVATIVES3}[dim]
+        if orders not in table:
+            top = max(sum(o) for o in table)
+            raise ValueError(f"field {s_}: a derivative of order {sum(orders)} (at most {top} are evaluated "
+                             f"for a {dim}-D field)")
+        key = (coords, s_, dim)
         if key not in groups:
             g = len(groups)
             groups[key] = g
-            lines.append(f"{pad}_fv{g} = {call(int(s_), pr.doprint(X), pr.doprint(Y))}")
+            lines.append(f"{pad}_fv{g} = {call(s_, *(pr.doprint(c) for c in coords))}")
         g = groups[key]
-        sym = sympy.Dummy(f"f{g}_{int(a)}{int(b)}")
+        tag = "".join(str(o) for o in orders)
+        sym = sympy.Dummy(f"f{g}_{tag}")
         subst[atom] = sym
-        fnames[sym] = f"_f{g}_{int(a)}{int(b)}"
-        lines.append(f"{pad}{fnames[sym]} = _fv{g}[{DERIVATIVES.index((int(a), int(b)))}]")
+        fnames[sym] = f"_f{g}_{tag}"
+        lines.append(f"{pad}{fnames[sym]} = _fv{g}[{table.index(orders)}]")
     return [e.xreplace(subst) for e in exprs], lines, fnames
 
 
@@ -237,7 +254,7 @@ def _point_body(system, printer=None):
     light, extra = th + T + dH, TT + HH
     P = len(params)
     exprs, prelude, fnames = field_prelude([e for _, e in light + extra], q, params, 4,
-                                           lambda s, X, Y: f"field(_k, {P}, {s}, {X}, {Y})")
+                                           _field_call("_k", P))
     el, ex = exprs[:len(light)], exprs[len(light):]
     first, known = _body(el, [t for t, _ in light], q, params, 4, printer=printer, fields=fnames)
     second, _ = _body(ex, [t for t, _ in extra], q, params, 8, known, printer=printer, fields=fnames)
@@ -329,7 +346,7 @@ def generate_dd_source(system) -> str:
     head += [f"    _q{i} = ld(_qin, {i})" for i in range(d)] + kdd
     scal = [system.H_expr, system.momentum_expr if system.momentum_expr is not None else sympy_zero()]
     P = len(params)
-    scal, sprelude, sfields = field_prelude(scal, q, params, 4, lambda s, X, Y: f"field(_k, {P}, {s}, {X}, {Y})")
+    scal, sprelude, sfields = field_prelude(scal, q, params, 4, _field_call("_k", P))
     sbody, _ = _body(scal, [("_out", 0), ("_out", 1)], q, params, 4, printer=_DDPrinter, fields=sfields)
     sbody = sprelude + sbody
     lines = [f'"""Generated by integrators.codegen for the system {system.name!r} (double-double); do not edit."""',
@@ -354,7 +371,8 @@ def generate_dd_source(system) -> str:
 
 def _field_import(system):
     """The generated module's import of the spline evaluation, for a system that uses fields."""
-    return ["from integrators.splines import field"] if getattr(system, "fields", ()) else []
+    return (["from integrators.splines import field, field1", "from integrators.splines3 import field3"]
+            if getattr(system, "fields", ()) else [])
 
 
 def sympy_zero():
@@ -367,7 +385,7 @@ def _body_plain(exprs, targets, qsyms, params, indent):
     import sympy
     P = len(params)
     exprs, prelude, fnames = field_prelude(list(exprs), qsyms, params, indent,
-                                           lambda s, X, Y: f"field(_k, {P}, {s}, {X}, {Y})")
+                                           _field_call("_k", P))
     subs, reduced = sympy.cse(list(exprs), symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
                               optimizations="basic")
     names = {s: f"_q{i}" for i, s in enumerate(qsyms)}

@@ -286,6 +286,24 @@ def _gather(k, starts, off):
     return v
 
 
+@njit(cache=True, error_model="numpy")
+def _dd_put10(hi, lo, l, o):
+    """Lane l of ten double-double lane vectors (their hi and lo parts) set from ten double-doubles."""
+    return ((_vset(hi[0], l, o[0].hi), _vset(hi[1], l, o[1].hi), _vset(hi[2], l, o[2].hi), _vset(hi[3], l, o[3].hi),
+             _vset(hi[4], l, o[4].hi), _vset(hi[5], l, o[5].hi), _vset(hi[6], l, o[6].hi), _vset(hi[7], l, o[7].hi),
+             _vset(hi[8], l, o[8].hi), _vset(hi[9], l, o[9].hi)),
+            (_vset(lo[0], l, o[0].lo), _vset(lo[1], l, o[1].lo), _vset(lo[2], l, o[2].lo), _vset(lo[3], l, o[3].lo),
+             _vset(lo[4], l, o[4].lo), _vset(lo[5], l, o[5].lo), _vset(lo[6], l, o[6].lo), _vset(lo[7], l, o[7].lo),
+             _vset(lo[8], l, o[8].lo), _vset(lo[9], l, o[9].lo)))
+
+
+@njit(cache=True, error_model="numpy")
+def _ddv10(hi, lo):
+    """Ten DDVecs from their hi and lo parts."""
+    return (ddv(hi[0], lo[0]), ddv(hi[1], lo[1]), ddv(hi[2], lo[2]), ddv(hi[3], lo[3]), ddv(hi[4], lo[4]),
+            ddv(hi[5], lo[5]), ddv(hi[6], lo[6]), ddv(hi[7], lo[7]), ddv(hi[8], lo[8]), ddv(hi[9], lo[9]))
+
+
 def field(k, P, s, x, y):
     """The ten derivatives (:data:`DERIVATIVES`) of the system's field ``s`` at (x, y): ``k`` the
     point function's parameter pointer, ``P`` the number of parameters before the data."""
@@ -315,15 +333,136 @@ def _field_ov(k, P, s, x, y):
             lo = hi
             for l in range(W):
                 o = _field_scalar(k, P, s, dd(_vget(x.hi, l), _vget(x.lo, l)), dd(_vget(y.hi, l), _vget(y.lo, l)))
-                hi = (_vset(hi[0], l, o[0].hi), _vset(hi[1], l, o[1].hi), _vset(hi[2], l, o[2].hi),
-                      _vset(hi[3], l, o[3].hi), _vset(hi[4], l, o[4].hi), _vset(hi[5], l, o[5].hi),
-                      _vset(hi[6], l, o[6].hi), _vset(hi[7], l, o[7].hi), _vset(hi[8], l, o[8].hi),
-                      _vset(hi[9], l, o[9].hi))
-                lo = (_vset(lo[0], l, o[0].lo), _vset(lo[1], l, o[1].lo), _vset(lo[2], l, o[2].lo),
-                      _vset(lo[3], l, o[3].lo), _vset(lo[4], l, o[4].lo), _vset(lo[5], l, o[5].lo),
-                      _vset(lo[6], l, o[6].lo), _vset(lo[7], l, o[7].lo), _vset(lo[8], l, o[8].lo),
-                      _vset(lo[9], l, o[9].lo))
-            return (ddv(hi[0], lo[0]), ddv(hi[1], lo[1]), ddv(hi[2], lo[2]), ddv(hi[3], lo[3]), ddv(hi[4], lo[4]),
-                    ddv(hi[5], lo[5]), ddv(hi[6], lo[6]), ddv(hi[7], lo[7]), ddv(hi[8], lo[8]), ddv(hi[9], lo[9]))
+                hi, lo = _dd_put10(hi, lo, l, o)
+            return _ddv10(hi, lo)
         return lanes_dd
     return lambda k, P, s, x, y: _field_scalar(k, P, s, x, y)
+
+
+# -- one coordinate: profiles ------------------------------------------------------------------------
+
+#: the derivatives a 1-D field's evaluation returns, in this order
+DERIVATIVES1 = (0, 1, 2, 3)
+HEADER1 = 3                # a 1-D field's block: n, X0, dX, then (n − 1) cells × 6
+
+
+class Field1(sympy.Function):
+    """∂ᵃ_X of the system's 1-D spline field number ``s`` at X: ``Field1(X, s, a)`` (a profile such
+    as G(ψ), ι(ψ)); derivatives past the third are refused where code is generated."""
+
+    nargs = 3
+    is_real = True
+
+    def fdiff(self, argindex=1):
+        x, s, a = self.args
+        if argindex == 1:
+            return Field1(x, s, a + 1)
+        raise sympy.ArgumentIndexError(self, argindex)
+
+    def _eval_is_real(self):
+        return True
+
+
+class Spline1:
+    """The quintic not-a-knot interpolating spline of ``values[i]`` = f(X[i]) on a regular grid, as
+    :class:`Spline2` along one axis: ``coefficients[i, a]`` the coefficient of (X − Xm_i)ᵃ on cell i."""
+
+    def __init__(self, X, values):
+        from scipy.interpolate import make_interp_spline
+        X, values = (np.asarray(v, dtype=np.float64) for v in (X, values))
+        if X.ndim != 1 or values.shape != X.shape:
+            raise ValueError(f"a 1-D spline needs values of the grid's shape {X.shape}, got {values.shape}")
+        if X.size < ORDER + 1:
+            raise ValueError(f"a quintic spline needs at least {ORDER + 1} grid points, got {X.size}")
+        step = np.diff(X)
+        if not (np.all(step > 0) and np.allclose(step, step[0], rtol=1e-9, atol=0)):
+            raise ValueError("the grid must be regular and increasing")
+        if not np.all(np.isfinite(values)):
+            raise ValueError("the field's grid values are not all finite")
+        self.X0, self.dX, self.n = float(X[0]), float((X[-1] - X[0]) / (X.size - 1)), X.size
+        sp = make_interp_spline(X, values, k=ORDER)
+        Xm = self.X0 + (np.arange(self.n - 1) + 0.5) * self.dX
+        fact = [1.0, 1.0, 2.0, 6.0, 24.0, 120.0]
+        self.coefficients = np.stack([(sp.derivative(a)(Xm) if a else sp(Xm)) / fact[a] for a in range(ORDER + 1)], 1)
+
+    def pack(self):
+        """The field's block of a system's data: [n, X0, dX, coefficients…]."""
+        return np.concatenate([[self.n, self.X0, self.dX], self.coefficients.ravel()])
+
+    def __call__(self, X, a=0):
+        """∂ᵃ_X at points (numpy arrays; any real or complex dtype)."""
+        if getattr(self, "_alone", None) is None:
+            self._alone = pack([self])
+        return field1_np(self._alone, 0, np.asarray(X))[a]
+
+
+def field1_np(k, s, x, P=0):
+    """The four derivatives of 1-D field ``s`` of the data at ``k[P:]`` at points x (numpy arrays of any
+    real or complex dtype): :func:`field1`'s operations, elementwise."""
+    k = np.asarray(k, dtype=np.float64)
+    base = P + int(k[P + s])
+    n, X0, dX = int(k[base]), k[base + 1], k[base + 2]
+    xr = np.real(x).astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        i = np.where(np.isfinite(xr), np.clip(np.floor((xr - X0) / dX), 0, n - 2), 0).astype(np.int64)
+    xm = x - (X0 + (i + 0.5) * dX)
+    c = k[(base + HEADER1 + i * 6)[..., None] + np.arange(6)]
+    row = [c[..., b] for b in range(6)]
+    return tuple(_horner_deriv(row, xm, m) for m in range(4))
+
+
+@njit(cache=True, error_model="numpy")
+def _locate1(k, base, xr):
+    """The cell of the real point xr in the 1-D field at ``base``: its first coefficient's index, its midpoint."""
+    n, X0, dX = int(k[base]), k[base + 1], k[base + 2]
+    i = 0
+    if np.isfinite(xr):
+        i = int(min(max(np.floor((xr - X0) / dX), 0.0), n - 2.0))
+    return base + HEADER1 + i * 6, X0 + (i + 0.5) * dX
+
+
+@njit(cache=True, error_model="numpy")
+def _evaluate1(k, p, xm):
+    return _rows(_coef(k, p, 0), _coef(k, p, 1), _coef(k, p, 2), _coef(k, p, 3), _coef(k, p, 4), _coef(k, p, 5), xm)
+
+
+@njit(cache=True, error_model="numpy")
+def _field1_scalar(k, P, s, x):
+    p, m = _locate1(k, P + int(k[P + s]), re(x))
+    return _evaluate1(k, p, x - m)
+
+
+def field1(k, P, s, x):
+    """The value and first three derivatives of the system's 1-D field ``s`` at x."""
+
+
+@overload(field1, inline="never")
+def _field1_ov(k, P, s, x):
+    if isinstance(x, Vec):
+        W = x.W
+
+        def lanes(k, P, s, x):
+            base = P + int(k[P + s])
+            starts, xm = x, x
+            for l in range(W):
+                xr = _vget(x, l)
+                p, m = _locate1(k, base, xr)
+                starts = _vset(starts, l, float(p))
+                xm = _vset(xm, l, xr - m)
+            return _evaluate1(k, starts, xm)
+        return lanes
+    if isinstance(x, DDVec):
+        W = x.W
+
+        def lanes_dd(k, P, s, x):
+            hi = (x.hi, x.hi, x.hi, x.hi)
+            lo = hi
+            for l in range(W):
+                o = _field1_scalar(k, P, s, dd(_vget(x.hi, l), _vget(x.lo, l)))
+                hi = (_vset(hi[0], l, o[0].hi), _vset(hi[1], l, o[1].hi), _vset(hi[2], l, o[2].hi),
+                      _vset(hi[3], l, o[3].hi))
+                lo = (_vset(lo[0], l, o[0].lo), _vset(lo[1], l, o[1].lo), _vset(lo[2], l, o[2].lo),
+                      _vset(lo[3], l, o[3].lo))
+            return (ddv(hi[0], lo[0]), ddv(hi[1], lo[1]), ddv(hi[2], lo[2]), ddv(hi[3], lo[3]))
+        return lanes_dd
+    return lambda k, P, s, x: _field1_scalar(k, P, s, x)

@@ -24,12 +24,17 @@ import sympy
 from .codegen import _Printer
 
 
+def _numpy_field_call(s, *X):
+    """The numpy functions' call of a spline field (1-, 2- or 3-D) on the system's data."""
+    return f"{('_field1_np', '_field_np', '_field3_np')[len(X) - 1]}(_DATA, {s}, {', '.join(X)})"
+
+
 def _compile(exprs, shape, qsyms, params, name, data=None):
     """Compile sympy expressions into ``f(q) -> array of shape q.shape[:-1] + shape``; ``data``:
     the system's spline fields (integrators/splines.py), which the expressions may use."""
     from .codegen import field_prelude
     flat, prelude, fnames = field_prelude(list(exprs), qsyms, params, 4,
-                                          lambda s, X, Y: f"_field_np(_DATA, {s}, {X}, {Y})")
+                                          _numpy_field_call)
     subs, reduced = sympy.cse(flat, symbols=(sympy.Dummy(f"x{i}") for i in itertools.count()),
                               optimizations="basic")
     names = {s: f"_q{i}" for i, s in enumerate(qsyms)}
@@ -58,8 +63,9 @@ def _compile(exprs, shape, qsyms, params, name, data=None):
     src = "\n".join(lines)
     namespace = {"numpy": np, **{f"_K{i}": float(v) for i, v in enumerate(params.values())}}
     if prelude:
-        from .splines import field_np
-        namespace.update(_field_np=field_np, _DATA=data)
+        from .splines import field1_np, field_np
+        from .splines3 import field3_np
+        namespace.update(_field1_np=field1_np, _field_np=field_np, _field3_np=field3_np, _DATA=data)
     exec(compile(src, f"<generated {name}>", "exec"), namespace)
     fn = namespace[name]
     fn.source = src

@@ -247,3 +247,19 @@ driver._batch = lambda seconds_per_output, points: 2
 driver._cadence = lambda seconds_per_output, checkpoint_seconds: 3
 driver.run(load_scene(sys.argv[1]), sys.argv[2], progress=False)
 """
+
+
+def assert_jacobian_is_complex_steps(system, eng, h, q, p, lam, z, tol=1e-12):
+    """The kernel's Newton Jacobian at (q, p, Λ, z) against complex-step differences of its residual,
+    column by column, through the system's complex point function: within ``tol`` of each column's size."""
+    from integrators import kernel
+    from integrators.codegen import point_functions
+    ev_r, _ = point_functions(system)
+    ev_c, _ = point_functions(system, complex_step=True)
+    _, J = kernel.probe(ev_r, eng.k, eng.tab, eng.plan, h, q, p, lam, z, True, s=eng.tableau.s)
+    for k in range(eng.nz):
+        zc = z.astype(complex)
+        zc[k] += 1e-30j
+        col = kernel.probe(ev_c, eng.k, eng.tab, eng.plan, h, q.astype(complex), p.astype(complex),
+                           lam.astype(complex), zc, False, s=eng.tableau.s)[0].imag / 1e-30
+        assert np.max(np.abs(J[:, k] - col)) <= tol * max(1.0, np.max(np.abs(col))), k

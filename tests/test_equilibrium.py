@@ -170,23 +170,15 @@ def test_lanes_give_the_scalar_paths_bits_in_the_spline_field(shipped, rng):
 def test_the_jacobian_is_exact_in_the_spline_field(shipped, proj, rng):
     """The kernel's Jacobian against complex-step differences of its residual, through the spline
     field's complex evaluation: to 1e-12."""
-    from integrators.codegen import point_functions
+    from helpers import assert_jacobian_is_complex_steps
     h = 120.0
     eng = integrators.Engine(shipped, integrators.tableau("GLRK2"), proj, h)
-    ev_r, _ = point_functions(shipped)
-    ev_c, _ = point_functions(shipped, complex_step=True)
     q = PASSING + np.array([2e-3, -1e-3, 0.0, 1e-4])
     p = shipped.theta(q) + 1e-6 * rng.standard_normal(4)
     lam = 1e-6 * rng.standard_normal(4)
     z = 1e-5 * rng.standard_normal(eng.nz)
     z[:8] += np.tile(h * shipped.vector_field(q), 2)
-    _, J = kernel.probe(ev_r, eng.k, eng.tab, eng.plan, h, q, p, lam, z, True, s=eng.tableau.s)
-    for k in range(eng.nz):
-        zc = z.astype(complex)
-        zc[k] += 1e-30j
-        col = kernel.probe(ev_c, eng.k, eng.tab, eng.plan, h, q.astype(complex), p.astype(complex),
-                           lam.astype(complex), zc, False, s=eng.tableau.s)[0].imag / 1e-30
-        assert np.max(np.abs(J[:, k] - col)) <= 1e-12 * max(1.0, np.max(np.abs(col))), k
+    assert_jacobian_is_complex_steps(shipped, eng, h, q, p, lam, z)
 
 
 def test_double_double_runs_in_the_spline_field(shipped):
