@@ -56,7 +56,8 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from .splines import Field, Spline2
+from .splines import Field, Field1, Spline1, Spline2
+from .splines3 import Field3, Spline3
 
 REQUIRED = ("nfp_b", "ns_b", "iota_b", "bvco_b", "buco_b", "phi_b", "ixm_b", "ixn_b", "bmnc_b", "jlist")
 REFINE = 16                # nodes of the profiles' ψ grid per half-grid interval, over 2
@@ -65,6 +66,8 @@ MARGIN = 0.08              # the Cartesian grid reaches (1 + MARGIN) r₁ past t
 AXIS_POWER = 2             # b_mn/s^{min(m, 2)/2} is what is interpolated in s (module docstring)
 OVERSHOOT = 1.5            # a mode's cubic spline that strays past this × its data is replaced by PCHIP
 H_PER_TRANSIT = 320        # default steps per poloidal transit of the default passing orbit
+ZETA_PER_HARMONIC = 8      # default nodes of the 3-D field's ζ grid per period, per toroidal harmonic kept
+FIELDS = ("3d", "harmonics")   # how |B| is interpolated (system_from_boozer's ``field``)
 
 
 class BoozerError(ValueError):
@@ -297,15 +300,11 @@ def _psi_grid(bz):
 
 
 def profile_fields(bz):
-    """Quintic splines in ψ (as 2-D fields constant in their second argument) of G, Ĩ = I/(2ψ) and ψ_p."""
+    """Quintic splines in ψ (:class:`~integrators.splines.Spline1`) of G, Ĩ = I/(2ψ) and ψ_p."""
     iota, G, Is, psip = bz.profiles()
     s = _psi_grid(bz)
     psi = s * bz.psi0
-    Z = np.arange(6) - 2.5
-    out = []
-    for vals in (G(s), Is(s) / (2 * bz.psi0), bz.psi0 * psip(s)):
-        out.append(Spline2(psi, Z, np.repeat(np.asarray(vals, float)[:, None], Z.size, 1)))
-    return out
+    return [Spline1(psi, np.asarray(vals, float)) for vals in (G(s), Is(s) / (2 * bz.psi0), bz.psi0 * psip(s))]
 
 
 def harmonic_fields(bz, modes_tol=1e-4, grid=GRID):
@@ -324,19 +323,47 @@ def harmonic_fields(bz, modes_tol=1e-4, grid=GRID):
     return ns, fields
 
 
-def _symbolic(harmonics):
+def field_3d(bz, modes_tol=1e-4, grid=GRID, grid_zeta=None):
+    """|B| as one :class:`~integrators.splines3.Spline3` in (x, y, ζ), ζ over one field period:
+    the harmonics' sum (:meth:`Boozer.harmonics`) on the Cartesian grid of :func:`harmonic_fields`
+    at ``grid_zeta`` ζ nodes (default ZETA_PER_HARMONIC × the largest harmonic per period, at least
+    16).  Returns (the harmonics n, the spline, its ζ nodes)."""
+    r1 = math.sqrt(2 * bz.psi0)
+    x = np.linspace(-(1 + MARGIN) * r1, (1 + MARGIN) * r1, grid)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    harm = bz.harmonics(X, Y, modes_tol)
+    ns = sorted(harm)
+    if grid_zeta is None:
+        grid_zeta = max(16, ZETA_PER_HARMONIC * (max(ns) // bz.nfp))
+    grid_zeta = int(grid_zeta)
+    if grid_zeta < 6:
+        raise ValueError(f"grid_zeta = {grid_zeta}: the 3-D field needs at least 6 ζ nodes a period")
+    zeta = np.arange(grid_zeta) * (2 * np.pi / bz.nfp) / grid_zeta
+    values = np.zeros((grid, grid, grid_zeta))
+    for n in ns:
+        C, S = harm[n]
+        values += C[:, :, None] * np.cos(n * zeta)
+        if n:
+            values += S[:, :, None] * np.sin(n * zeta)
+    return ns, Spline3(x, x, 2 * np.pi / bz.nfp, values), grid_zeta
+
+
+def _symbolic(harmonics, three_d=False):
     """ϑ, H, the domain, the symbols and the B expression; fields 0–2 the profiles (G, Ĩ, ψ_p in ψ),
-    then C₀ and (C_n, S_n) for the harmonics n > 0."""
+    then either the 3-D field |B|(x, y, ζ) (``three_d``) or C₀ and (C_n, S_n) for the harmonics n > 0."""
     x, y, zeta, rho = sympy.symbols("x y zeta rho", real=True)
     mu, psi0 = sympy.symbols("mu psi_edge")
     psi = (x**2 + y**2) / 2
-    G, It, psip = (Field(psi, 0, i, 0, 0) for i in range(3))
-    B = Field(x, y, 3, 0, 0)
-    f = 4
-    for n in harmonics:
-        if n:
-            B = B + Field(x, y, f, 0, 0) * sympy.cos(n * zeta) + Field(x, y, f + 1, 0, 0) * sympy.sin(n * zeta)
-            f += 2
+    G, It, psip = (Field1(psi, i, 0) for i in range(3))
+    if three_d:
+        B = Field3(x, y, zeta, 3, 0, 0, 0)
+    else:
+        B = Field(x, y, 3, 0, 0)
+        f = 4
+        for n in harmonics:
+            if n:
+                B = B + Field(x, y, f, 0, 0) * sympy.cos(n * zeta) + Field(x, y, f + 1, 0, 0) * sympy.sin(n * zeta)
+                f += 2
     half = sympy.Rational(1, 2) + rho * It
     theta = [-y * half, x * half, rho * G - psip, sympy.Integer(0)]
     H = rho**2 * B**2 / 2 + mu * B
@@ -344,7 +371,7 @@ def _symbolic(harmonics):
     return (x, y, zeta, rho), theta, H, domain, B, dict(mu=mu, psi_edge=psi0)
 
 
-def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None):
+def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None, field="3d", grid_zeta=None):
     """The guiding centre in the Boozer field of a boozmn file (module docstring): a
     :class:`~integrators.systems.System` with q = (x, y, ζ, ρ) (the axis chart), parameters ``mu``
     and ``psi_edge`` (ψ₀), symmetry ∂/∂ζ where only n = 0 is kept (an axisymmetric file: P_ζ =
@@ -353,17 +380,32 @@ def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None):
     mu : the magnetic moment (default v²/(4|B₀₀(axis)|), v = a|B|/100 the reference speed, a the
         file's minor radius: a Larmor radius of 1 % of it)
     modes_tol : modes below this fraction of |b₀₀| are left out (0 keeps all)
-    grid : points a side of the Cartesian grid of the |B| harmonics
+    grid : points a side of the Cartesian grid of |B|
+    field : ``"3d"`` (default) |B| as one spline in (x, y, ζ), cubic in x, y and quintic in ζ
+        (:func:`field_3d`, :mod:`integrators.splines3`), whose cost
+        does not grow with the modes kept; ``"harmonics"`` a quintic (x, y) spline per toroidal
+        harmonic, summed with cos nζ, sin nζ (exact in ζ, C⁴; its cost grows with the harmonics).
+        A file with only n = 0 kept (axisymmetric) always takes the harmonics' form: one (x, y)
+        spline, so ∂H/∂ζ is exactly 0 and P_ζ is conserved to round-off.
+    grid_zeta : ζ nodes a field period of the 3-D field (default :func:`field_3d`'s)
 
     ``defaults``: ``q0`` (a passing guiding centre at s = 0.3, θ = ζ = 0, v∥ = max(v/√2, 1.5 v_c)
     with v_c the trapped-passing boundary on that surface), ``trapped`` (v∥ = v_c/3), ``h`` (1/320
     of the passing orbit's poloidal transit 2π R₀/(ι |v∥|)), ``speed``, ``boozer`` (the path),
     ``notes``."""
+    if field not in FIELDS:
+        raise ValueError(f"field = {field!r}: one of {', '.join(map(repr, FIELDS))}")
     bz = read_boozmn(path)
     keep = bz.modes(modes_tol)[0]
-    ns, hfields = harmonic_fields(bz, modes_tol, grid)
+    ns = sorted(int(n) for n in np.unique(np.abs(bz.xn[keep])))
+    three_d = field == "3d" and ns != [0]
+    if three_d:
+        ns, f3, grid_zeta = field_3d(bz, modes_tol, grid, grid_zeta)
+        hfields = [f3]
+    else:
+        ns, hfields = harmonic_fields(bz, modes_tol, grid)
     fields = profile_fields(bz) + hfields
-    (x, y, zeta, rho), theta, H, domain, B, sym = _symbolic(ns)
+    (x, y, zeta, rho), theta, H, domain, B, sym = _symbolic(ns, three_d)
     B00 = bz.modB(1e-12, 0.0, 0.0, modes_tol)
     Baxis = abs(float(B00))
     a = bz.minor_radius if math.isfinite(bz.minor_radius) else math.sqrt(2 * abs(bz.psi0) / max(Baxis, 1e-300))
@@ -392,13 +434,16 @@ def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None):
     G0 = float(bz.profiles()[1](s0))
     R0 = abs(G0 / B0)                      # G ≈ R B: the major radius the transit takes
     h = 2 * math.pi * R0 / max(abs(iota), 1e-3) / u_pass / H_PER_TRANSIT
+    grid_text = (f"one spline in (x, y, ζ) (cubic in x, y; quintic in ζ) on {grid} × {grid} × {grid_zeta} nodes a field period" if three_d
+                 else f"a quintic spline a harmonic on a {grid} × {grid} grid")
     notes = (f"{bz.xm.size} modes in the file, {keep.size} kept (|b_mn| ≥ {modes_tol:g} |b_00|), "
-             f"{len(ns)} toroidal harmonics on a {grid} × {grid} grid",
+             f"{len(ns)} toroidal harmonics; |B| as {grid_text}",
              "White's guiding centre with K = 0 (the covariant B_ψ is not kept)",
              f"ψ = s ψ₀, ψ₀ = Φ_edge/2π = {bz.psi0:.6g}; the file's sign of ι ({'+' if iota >= 0 else '−'}) and of G, I")
     system.defaults.update({"q0": [r, 0.0, 0.0, u_pass / B0], "trapped": [r, 0.0, 0.0, (u_c / 3 if u_c else 0.15 * v) / B0],
                             "h": float(f"{h:.2g}"), "speed": v, "u_boundary": u_c, "boozer": str(path),
-                            "harmonics": tuple(ns), "notes": notes})
+                            "harmonics": tuple(ns), "field": "3d" if three_d else "harmonics",
+                            "grid_zeta": grid_zeta if three_d else None, "notes": notes})
     system.boozer = bz
     return system
 
@@ -413,6 +458,6 @@ def field_line_system(path_or_boozer, name=None):
     psi0 = sympy.Symbol("psi_edge")
     psi = (x**2 + y**2) / 2
     fields = profile_fields(bz)
-    H = Field(psi, 0, 2, 0, 0)
+    H = Field1(psi, 2, 0)
     return System(name or f"field_lines:{Path(bz.path).stem}", [x, y], [-y / 2, x / 2], H, {psi0: bz.psi0},
                   domain=[1 - psi / psi0], defaults={}, fields=fields, source=bz.path)

@@ -28,7 +28,9 @@ A scene file::
     [system]                              # ... or guiding centres in a stellarator's Boozer field (docs/stellarators.md)
     boozer = "boozmn_x.nc"                # a booz_xform boozmn file (NetCDF 3), found as an equilibrium file is
     modes_tol = 1e-4                      # optional: modes below this fraction of |b_00| are left out
-    grid = 96                             # optional: the (x, y) grid of |B|'s harmonics, points a side
+    grid = 96                             # optional: the (x, y) grid of |B|, points a side
+    field = "3d"                          # optional: |B| as one spline in (x, y, ζ), or "harmonics"
+    grid_zeta = 56                        # optional: the 3-D field's ζ nodes a field period (default 8 a harmonic)
     params = { mu = 1e-5 }                # optional: the magnetic moment (default from the plasma's size and field)
 
     [system]                              # ... or a canonical phase space with no formula (docs/systems.md)
@@ -367,7 +369,7 @@ _SCHEMA = {
     "": {"name": str, "system": dict, "loop": dict, "surface": dict, "run": dict, "output": dict},
     "system": {"name": str, "params": dict, "coordinates": list, "theta": list, "H": str, "symmetry": list,
                "momentum": str, "domain": list, "function": str, "equilibrium": str, "cocos": int,
-               "boozer": str, "modes_tol": float, "grid": int,
+               "boozer": str, "modes_tol": float, "grid": int, "field": str, "grid_zeta": int,
                "degrees_of_freedom": int, "dimension": int, "one_form": str, "period": object, "energy": str},
     "loop": {"shape": str, "points": int, "params": dict, "refine_to": int},
     "surface": {"shape": str, "n_sigma": int, "n_tau": int, "params": dict, "refine_to": int},

@@ -40,7 +40,7 @@ path = "{output or name + '.h5'}"
 '''
 
 
-def boozer_scene(path, *, name=None, steps=1000, output=None, modes_tol=1e-4, grid=96) -> str:
+def boozer_scene(path, *, name=None, steps=1000, output=None, modes_tol=1e-4, grid=96, field="3d") -> str:
     """The TOML text of a scene built from a boozmn file's own defaults (docs/stellarators.md), as
     :func:`equilibrium_scene` does for G-EQDSK files: the loop (2,048 points, refining to 8,192) a
     circle in the axis chart's (x, y) of radius r₁/5000 (r₁ = √(2ψ₀), the boundary's radius there)
@@ -48,7 +48,7 @@ def boozer_scene(path, *, name=None, steps=1000, output=None, modes_tol=1e-4, gr
     square of side r₁/2500 around the trapped one, h = ``defaults["h"]``, GLRK1 and GLRK2 with every
     projection, every form.  Save it, edit it, run it: ``poincare run file.toml``."""
     from ..boozer import system_from_boozer
-    sy = system_from_boozer(path, modes_tol=modes_tol, grid=grid)
+    sy = system_from_boozer(path, modes_tol=modes_tol, grid=grid, field=field)
     r1 = math.sqrt(2 * sy.param_values["psi_edge"])
     x0, y0, z0, rho0 = sy.defaults["q0"]
     rt = sy.defaults["trapped"][3]
@@ -62,6 +62,7 @@ name = "{name}"
 boozer = "{stem}"
 modes_tol = {float(modes_tol)!r}
 grid = {int(grid)}
+field = "{sy.defaults['field']}"
 params = {{ mu = {sy.param_values['mu']:.17g} }}
 
 {_file_scene_sets((x0, y0, z0, rho0), r1 / 5000, (x0, y0, z0, rt), r1 / 2500, sy.defaults['h'], steps, name, output)}'''

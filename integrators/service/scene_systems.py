@@ -31,7 +31,7 @@ def _system_of(sysd, base, points=MIN_POINTS):
         return _equilibrium_of(sysd, base)
     if "boozer" in sysd:
         return _boozer_of(sysd, base)
-    for k in ("modes_tol", "grid"):
+    for k in ("modes_tol", "grid", "field", "grid_zeta"):
         if k in sysd:
             raise SceneError(f"system.{k} belongs to system.boozer (a boozmn file)")
     if "degrees_of_freedom" in sysd or "dimension" in sysd or "one_form" in sysd:
@@ -94,8 +94,8 @@ def _field_file(sysd, base, key, others):
 
 
 def _boozer_of(sysd, base):
-    """[system] boozer = "boozmn_x.nc" (looked up as an equilibrium file is), modes_tol, grid,
-    params = {mu = …}: the guiding centre in that Boozer field (integrators.boozer).  The file is
+    """[system] boozer = "boozmn_x.nc" (looked up as an equilibrium file is), modes_tol, grid, field,
+    grid_zeta, params = {mu = …}: the guiding centre in that Boozer field (integrators.boozer).  The file is
     data: it is read, never run."""
     e, digest, params = _field_file(sysd, base, "boozer", ("equilibrium", "cocos"))
     tol = sysd.get("modes_tol", 1e-4)
@@ -104,7 +104,16 @@ def _boozer_of(sysd, base):
     grid = sysd.get("grid", 96)
     if not 16 <= grid <= 1024:
         raise SceneError(f"system.grid must be between 16 and 1024 points a side, got {grid}")
-    spec = {"boozer": e, "modes_tol": float(tol), "grid": int(grid), "sha256": digest}
+    from ..boozer import FIELDS
+    field = sysd.get("field", "3d")
+    if field not in FIELDS:
+        raise SceneError(f"system.field must be one of {', '.join(map(repr, FIELDS))}, got {field!r}")
+    grid_zeta = sysd.get("grid_zeta", None)
+    if grid_zeta is not None and not 6 <= grid_zeta <= 4096:
+        raise SceneError(f"system.grid_zeta must be between 6 and 4096 points a field period, got {grid_zeta}")
+    spec = {"boozer": e, "modes_tol": float(tol), "grid": int(grid), "field": field, "sha256": digest}
+    if grid_zeta is not None:
+        spec["grid_zeta"] = int(grid_zeta)
     return _make_system(spec, params, base), params, spec
 
 
@@ -177,7 +186,8 @@ def _make_system(spec, params, base):
         rest = {k: v for k, v in params.items() if k != "mu"}
         try:
             made = system_from_boozer(_data_file(spec["boozer"], base, "system.boozer: file"), mu=params.get("mu", None),
-                                      modes_tol=spec.get("modes_tol", 1e-4), grid=spec.get("grid", 96))
+                                      modes_tol=spec.get("modes_tol", 1e-4), grid=spec.get("grid", 96),
+                                      field=spec.get("field", "3d"), grid_zeta=spec.get("grid_zeta", None))
             return made.with_params(**rest) if rest else made
         except BoozerError as exc:
             raise SceneError(f"system.boozer: {exc}") from None
