@@ -9,12 +9,13 @@
 (ρ = ρ∥ = v∥/B, charge/mass 1, the file's units T and m; the covariant radial component K is not
 kept, so the system is White's K = 0 form), written in the **axis chart**
 
-    x = √(2ψ) cos θ,   y = √(2ψ) sin θ,   q = (x, y, ζ, ρ),
+    x = √(2|ψ|) cos θ,   y = σ √(2|ψ|) sin θ,   q = (x, y, ζ, ρ),   σ = sign Φ,
 
-where dψ ∧ dθ = dx ∧ dy and ψ dθ = (x dy − y dx)/2: one chart from the magnetic axis to the
-boundary, smooth at the axis, so no clamp and no chart switch anywhere (SIMPLE #398).  ψ is the
-toroidal flux over 2π, ψ = s ψ₀ with ψ₀ = Φ_edge/2π > 0 (a file with Φ_edge < 0 is refused), and ψ_p the
-poloidal flux over 2π, dψ_p/dψ = ι.
+where dψ ∧ dθ = dx ∧ dy and ψ dθ = (x dy − y dx)/2 for either sign: one chart from the magnetic
+axis to the boundary, smooth at the axis, so no clamp and no chart switch anywhere (SIMPLE #398).
+ψ is the toroidal flux over 2π, ψ = s ψ₀ with ψ₀ = Φ_edge/2π (W7-X's files have Φ < 0: there
+θ = −atan2(y, x), ρ I dθ = ρ Ĩ (x dy − y dx) with Ĩ = I/(2ψ) carrying ψ's sign, and ψ_p = ψ₀ ∫ι ds
+too), and ψ_p the poloidal flux over 2π, dψ_p/dψ = ι.
 
 **The field's data** are one set of interpolants from which ϑ and H are both built:
 
@@ -85,7 +86,8 @@ class Boozer:
     s : (nsurf,) the surfaces the transform kept, (jlist − 1.5)/(ns − 1)
     xm, xn : (mn,) the modes (xn with the field periods); bmnc, bmns : (nsurf, mn), bmns None if
         stellarator-symmetric; rmnc, zmns : the surfaces' shape (R, Z), where the file has them
-    minor_radius : (rmax_b − rmin_b)/2 where the file has them, else NaN
+    minor_radius : (rmax_b − rmin_b)/2 where the file has them (and they differ), else R₀₀/``aspect_b``
+        on the outermost kept surface, else NaN
     """
 
     path: str
@@ -109,8 +111,18 @@ class Boozer:
 
     @property
     def psi0(self) -> float:
-        """ψ at the boundary: the toroidal flux over 2π."""
+        """ψ at the boundary: the toroidal flux over 2π, with its sign."""
         return self.phi_edge / (2 * math.pi)
+
+    @property
+    def psi_abs(self) -> float:
+        """|ψ₀|: the axis chart's (x² + y²)/2 at the boundary."""
+        return abs(self.psi0)
+
+    @property
+    def sign(self) -> float:
+        """The sign σ of Φ: the axis chart's angle atan2(y, x) is σθ."""
+        return 1.0 if self.phi_edge > 0 else -1.0
 
     def surface_modB(self, j, theta, zeta):
         """The file's own Fourier sum Σ b_mn cos(mθ − nζ) (+ b^s sin) on kept surface number j."""
@@ -173,9 +185,9 @@ class Boozer:
         field periods included; S₀ is None): B = Σ_n C_n cos nζ + S_n sin nζ."""
         keep, p, cs, ss = self.modes(modes_tol)
         x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-        s = (x * x + y * y) / (2 * self.psi0)
+        s = (x * x + y * y) / (2 * self.psi_abs)
         se = _continued(s)
-        th = np.arctan2(y, x)
+        th = self.sign * np.arctan2(y, x)
         m, n = self.xm[keep], self.xn[keep]
         amp = se[..., None] ** (p / 2.0)            # 0 on the axis for m > 0
         cm, sm = amp * np.cos(m * th[..., None]), amp * np.sin(m * th[..., None])
@@ -277,11 +289,16 @@ def read_boozmn(path) -> Boozer:
             _fail(path, f"{key} has values that are not finite")
         arrays[key] = a
     phi_edge = float(prof["phi_b"][-1])
-    if not phi_edge > 0.0:
-        _fail(path, f"the toroidal flux phi_b is {phi_edge:g} at the boundary: only Φ > 0 is read (the axis chart "
-                    "takes ψ = Φ/2π ≥ 0; a file with Φ < 0 needs θ → −θ, not done)")
+    if not phi_edge != 0.0:
+        _fail(path, f"the toroidal flux phi_b is {phi_edge:g} at the boundary: the axis chart needs Φ ≠ 0")
     s_half = (np.arange(1, ns) - 0.5) / (ns - 1)
     minor = float((v["rmax_b"] - v["rmin_b"]) / 2) if "rmax_b" in v and "rmin_b" in v else float("nan")
+    if not minor > 0 and "aspect_b" in v and arrays["rmnc_b"] is not None:
+        # booz_xform's Python writer leaves rmax_b = rmin_b = 0: the major radius (R₀₀ on the outermost
+        # kept surface) over the aspect ratio instead
+        aspect = float(np.asarray(v["aspect_b"]))
+        r00 = arrays["rmnc_b"][-1, (xm == 0) & (xn == 0)]
+        minor = float(r00[0] / aspect) if r00.size and aspect > 0 else float("nan")
     return Boozer(path=path, nfp=nfp, ns=ns, asym=asym, s_half=s_half, iota=prof["iota_b"][1:],
                   G=prof["bvco_b"][1:], I=prof["buco_b"][1:], phi_edge=phi_edge,
                   s=(jlist - 1.5) / (ns - 1), xm=xm, xn=xn, bmnc=arrays["bmnc_b"], bmns=arrays["bmns_b"],
@@ -303,13 +320,13 @@ def profile_fields(bz):
     """Quintic splines in ψ (:class:`~integrators.splines.Spline1`) of G, Ĩ = I/(2ψ) and ψ_p."""
     iota, G, Is, psip = bz.profiles()
     s = _psi_grid(bz)
-    psi = s * bz.psi0
+    psi = s * bz.psi_abs           # the chart's (x² + y²)/2 = |ψ|; Ĩ and ψ_p carry ψ's sign
     return [Spline1(psi, np.asarray(vals, float)) for vals in (G(s), Is(s) / (2 * bz.psi0), bz.psi0 * psip(s))]
 
 
 def harmonic_fields(bz, modes_tol=1e-4, grid=GRID):
     """(the toroidal harmonics n, their Spline2 fields [C₀, C_n₁, S_n₁, …]) on the Cartesian grid."""
-    r1 = math.sqrt(2 * bz.psi0)
+    r1 = math.sqrt(2 * bz.psi_abs)
     x = np.linspace(-(1 + MARGIN) * r1, (1 + MARGIN) * r1, grid)
     X, Y = np.meshgrid(x, x, indexing="ij")
     harm = bz.harmonics(X, Y, modes_tol)
@@ -328,7 +345,7 @@ def field_3d(bz, modes_tol=1e-4, grid=GRID, grid_zeta=None):
     the harmonics' sum (:meth:`Boozer.harmonics`) on the Cartesian grid of :func:`harmonic_fields`
     at ``grid_zeta`` ζ nodes (default ZETA_PER_HARMONIC × the largest harmonic per period, at least
     16).  Returns (the harmonics n, the spline, its ζ nodes)."""
-    r1 = math.sqrt(2 * bz.psi0)
+    r1 = math.sqrt(2 * bz.psi_abs)
     x = np.linspace(-(1 + MARGIN) * r1, (1 + MARGIN) * r1, grid)
     X, Y = np.meshgrid(x, x, indexing="ij")
     harm = bz.harmonics(X, Y, modes_tol)
@@ -416,7 +433,7 @@ def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None, fiel
     if not math.isfinite(mu):
         raise BoozerError(f"{path}: mu = {mu!r} is not finite")
     from .systems import System
-    params = {sym["mu"]: mu, sym["psi_edge"]: bz.psi0}
+    params = {sym["mu"]: mu, sym["psi_edge"]: bz.psi_abs}
     system = System(name or f"boozer:{Path(path).stem}", [x, y, zeta, rho], theta, H, params,
                     symmetry=[0, 0, 1, 0] if ns == [0] else None,
                     momentum_name="toroidal momentum P_ζ" if ns == [0] else None, domain=domain,
@@ -459,5 +476,5 @@ def field_line_system(path_or_boozer, name=None):
     psi = (x**2 + y**2) / 2
     fields = profile_fields(bz)
     H = Field1(psi, 2, 0)
-    return System(name or f"field_lines:{Path(bz.path).stem}", [x, y], [-y / 2, x / 2], H, {psi0: bz.psi0},
+    return System(name or f"field_lines:{Path(bz.path).stem}", [x, y], [-y / 2, x / 2], H, {psi0: bz.psi_abs},
                   domain=[1 - psi / psi0], defaults={}, fields=fields, source=bz.path)

@@ -316,7 +316,7 @@ def _boozer_note(scene) -> str:
     spec = scene.system_spec
     notes = "".join(f"\nnote: {_printable(n)}" for n in sy.defaults.get("notes", ()))
     return (f"note: the field is read from {_printable(spec['boozer'])} (sha256 {spec['sha256'][:12]}…) in the axis "
-            f"chart (x, y) = √(2ψ)(cos θ, sin θ); points leaving s < 1 break down (docs/stellarators.md){notes}")
+            f"chart (x, y) = √(2|ψ|)(cos θ, σ sin θ), σ the sign of Φ; points leaving s < 1 break down (docs/stellarators.md){notes}")
 
 
 def _absolute_invariants(path) -> list:

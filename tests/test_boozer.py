@@ -112,7 +112,7 @@ def test_refuses_what_it_cannot_use(tmp_path, files):
         "not a NetCDF 3 boozmn file": bad,
         "no bmnc_b": _copy(CIRCULAR, tmp_path / "nobmn.nc", drop=("bmnc_b",)),
         "bmnc_b has shape": _copy(CIRCULAR, tmp_path / "shape.nc", change={"bmnc_b": files["circular"].bmnc[:, :40]}),
-        "only Φ > 0": _copy(CIRCULAR, tmp_path / "neg.nc", change={"phi_b": -np.linspace(0, 67.86, 17)}),
+        "the axis chart needs Φ ≠ 0": _copy(CIRCULAR, tmp_path / "zero.nc", change={"phi_b": np.zeros(17)}),
         "no such file": tmp_path / "missing.nc",
     }
     for what, path in cases.items():
@@ -139,6 +139,37 @@ def test_field_line_winding_is_the_files_iota(path):
     ang = np.unwrap(np.arctan2(sol.q[..., 1], sol.q[..., 0]), axis=0)
     winding = (ang[-1] - ang[0]) / (2 * np.pi * turns)
     assert np.max(np.abs(winding - bz.iota[js])) < 1e-9
+
+
+@pytest.mark.slow
+def test_a_file_with_negative_flux_is_the_mirror_image(tmp_path, files):
+    """li383 with Φ → −Φ (W7-X's files have Φ < 0): the chart turns the other way, θ = −atan2(y, x).
+    Its field lines wind at −ι in atan2 (to 1e-9), its |B| at (x, y) is the original's at (x, −y)
+    (to 1e-12), and its default orbits run with the original's energy error bound."""
+    bz = files["li383"]
+    flipped = _copy(LI383, tmp_path / "flipped.nc",
+                    change={"phi_b": -np.asarray(netcdf_file(LI383, "r", mmap=False).variables["phi_b"][:])})
+    fz = read_boozmn(flipped)
+    assert fz.sign == -1.0 and fz.psi0 == -bz.psi0 and fz.psi_abs == bz.psi0
+    js = np.array([3, 9])
+    r = np.sqrt(2 * fz.psi_abs * fz.s_half[js])
+    sol = integrators.integrate(field_line_system(fz), np.stack([r, 0 * r], 1), tableau="GLRK4", projection="none",
+                                h=2 * np.pi / 200, steps=200 * 10, save_every=1)
+    ang = np.unwrap(np.arctan2(sol.q[..., 1], sol.q[..., 0]), axis=0)
+    assert np.max(np.abs((ang[-1] - ang[0]) / (2 * np.pi * 10) + fz.iota[js])) < 1e-9
+    a, b = system_from_boozer(LI383), system_from_boozer(flipped)
+    rng = np.random.default_rng(5)
+    s, th, ze = rng.uniform(0, 0.95, 200), rng.uniform(0, 2 * np.pi, 200), rng.uniform(0, 2 * np.pi, 200)
+    rr = np.sqrt(2 * bz.psi0 * s)
+    q = np.stack([rr * np.cos(th), rr * np.sin(th), ze, 0 * s], 1)
+    qm = q * [1, -1, 1, 1]
+    assert np.max(np.abs(b.H(q) / a.H(qm) - 1)) < 1e-12
+    d = b.defaults
+    sol = integrators.integrate(b, np.array([d["q0"], d["trapped"]]), tableau="GLRK2", projection="symmetric",
+                                h=d["h"], steps=1000, save_every=100)
+    assert np.isinf(sol.breakdown_time).all()
+    E = np.stack([b.H(sol.q[:, i]) for i in range(2)])
+    assert np.max(np.abs(E / E[:, :1] - 1)) < 1e-6
 
 
 @pytest.fixture(scope="module")
