@@ -21,8 +21,9 @@ too), and ψ_p the poloidal flux over 2π, dψ_p/dψ = ι.
 
 * ι, G (``bvco_b``) and I (``buco_b``) on VMEC's half grid, interpolated by cubic splines in s (I as
   I/s, which is finite at the axis); ψ_p = ψ₀ ∫₀ˢ ι ds' exactly (the spline's antiderivative).
-  In the system G, Ĩ = I/(2ψ) and ψ_p are quintic splines in ψ on a grid that holds every half-grid
-  point and the axis (:data:`REFINE` nodes between half-grid points);
+  In the system G, Ĩ = I/(2ψ) and ψ_p are 1-D quintic splines in ψ (:class:`~integrators.splines.Spline1`)
+  on a grid that holds every half-grid point and the axis (:data:`REFINE` nodes between half-grid
+  points);
 * |B| = Σ b_mn(s) cos(mθ − nζ) (+ b^s_mn sin(mθ − nζ) where not stellarator-symmetric), n including
   the field periods as booz_xform writes it.  Each mode's b_mn(s)/s^{p/2}, p = min(m, 2), is
   interpolated in s through the surfaces the transform kept (``jlist``): by the cubic spline (C²),
@@ -38,9 +39,13 @@ too), and ψ_p the poloidal flux over 2π, dψ_p/dψ = ι.
 
       B = C₀(x, y) + Σ_{n>0} C_n(x, y) cos nζ + S_n(x, y) sin nζ,
 
-  each C_n, S_n a quintic tensor spline on a Cartesian (x, y) grid covering the boundary circle
-  (:mod:`integrators.splines`), so |B| and all its derivatives are evaluated in the compiled engine,
-  in lanes.  Modes whose largest |b_mn| over the kept surfaces is below ``modes_tol`` × |b₀₀| are
+  each C_n, S_n evaluated on a Cartesian (x, y) grid covering the boundary circle.  By default
+  (``field="3d"``) the sum at ``grid_zeta`` ζ nodes over a field period becomes one spline in
+  (x, y, ζ), quintic and periodic in ζ (:mod:`integrators.splines3`, C⁴ as the harmonics' are): one cell
+  lookup a point whatever the modes kept.  With ``field="harmonics"`` (and always for a file with
+  only n = 0 kept) each C_n, S_n is a quintic tensor spline (:mod:`integrators.splines`) and the
+  sum is taken in ζ exactly.  Either way |B| and all its derivatives are evaluated in the compiled
+  engine, in lanes.  Modes whose largest |b_mn| over the kept surfaces is below ``modes_tol`` × |b₀₀| are
   left out (``defaults["notes"]`` says how many).  Beyond s = 1 the modes continue with s replaced
   by 1 + tanh(s − 1) (equal to s up to second order at the edge), so the grid's corners stay
   bounded; the domain is s < 1.
@@ -398,7 +403,7 @@ def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None, fiel
         file's minor radius: a Larmor radius of 1 % of it)
     modes_tol : modes below this fraction of |b₀₀| are left out (0 keeps all)
     grid : points a side of the Cartesian grid of |B|
-    field : ``"3d"`` (default) |B| as one spline in (x, y, ζ), cubic in x, y and quintic in ζ
+    field : ``"3d"`` (default) |B| as one quintic spline in (x, y, ζ), periodic in ζ
         (:func:`field_3d`, :mod:`integrators.splines3`), whose cost
         does not grow with the modes kept; ``"harmonics"`` a quintic (x, y) spline per toroidal
         harmonic, summed with cos nζ, sin nζ (exact in ζ, C⁴; its cost grows with the harmonics).
@@ -451,7 +456,7 @@ def system_from_boozer(path, mu=None, modes_tol=1e-4, grid=GRID, name=None, fiel
     G0 = float(bz.profiles()[1](s0))
     R0 = abs(G0 / B0)                      # G ≈ R B: the major radius the transit takes
     h = 2 * math.pi * R0 / max(abs(iota), 1e-3) / u_pass / H_PER_TRANSIT
-    grid_text = (f"one spline in (x, y, ζ) (cubic in x, y; quintic in ζ) on {grid} × {grid} × {grid_zeta} nodes a field period" if three_d
+    grid_text = (f"one quintic spline in (x, y, ζ) on {grid} × {grid} × {grid_zeta} nodes a field period" if three_d
                  else f"a quintic spline a harmonic on a {grid} × {grid} grid")
     notes = (f"{bz.xm.size} modes in the file, {keep.size} kept (|b_mn| ≥ {modes_tol:g} |b_00|), "
              f"{len(ns)} toroidal harmonics; |B| as {grid_text}",

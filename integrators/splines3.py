@@ -1,24 +1,24 @@
-"""Tensor splines in (x, y, z), cubic in x and y, quintic and periodic in z, as symbols a system's ϑ
-and H can use.
+"""Quintic tensor splines in (x, y, z), periodic in z, as symbols a system's ϑ and H can use.
 
 The 3-D companion of :mod:`integrators.splines` for a field that depends on an angle as well as on
 two Cartesian coordinates: a stellarator's |B|(x, y, ζ) in the Boozer axis chart
 (:mod:`integrators.boozer`).  One evaluation costs the same whatever the field's Fourier content,
 where a sum over toroidal harmonics costs one 2-D spline per harmonic.
 
-**The interpolant.**  The tensor B-spline on uniform knots at the grid nodes (:class:`Spline3`):
-cubic in x and y with the not-a-knot condition at both ends (the third derivative continuous at the
-second and the last but one node), quintic in z and periodic with the period ``period``.  It is C²
-across cells in x and y and C⁴ in z, so ∇²H of an H that uses the field is continuous, and every
-derivative the engine takes is the exact derivative of the interpolant.  Quintic in z because a
-passing guiding centre's step spans several ζ cells, and a method of order 4 needs the field smooth
-past its third derivative there: with a cubic in ζ the jumps of the third derivative at the knots
-set the energy error, and it did not fall with h at the method's order (docs/stellarators.md).
-What is stored is each B-spline coefficient over 6 (x, y) × 120 (z), so
-that the basis is evaluated with whole-number coefficients (6× the cubic, 120× the quintic uniform
-basis and their derivatives in the cell's local t ∈ [0, 1)): the derivatives are exact derivatives
-of the evaluated polynomials, with no rounded 1/6 or 1/120 between them.  Its error for a smooth
-field is O(Δ⁴) in x and y, O(Δ⁶) in z.
+**The interpolant.**  The quintic tensor B-spline on uniform knots at the grid nodes
+(:class:`Spline3`): not-a-knot in x and y (the fifth derivative continuous at the second, third,
+last but two and last but one nodes), periodic in z with the period ``period``.  It is C⁴ across
+cells, as the 2-D fields of :mod:`integrators.splines` are, so ∇²H of an H that uses the field is
+continuous and the images of a smooth surface under the step stay smooth to the fourth derivative,
+and every derivative the engine takes is the exact derivative of the interpolant.  Quintic in
+every direction because lower degrees were tried and measured worse (docs/stellarators.md): cubic
+in ζ left the energy error of GLRK2-symmetric without the method's order (a step spans several ζ
+cells); cubic in x and y (C²) left kinks in the third derivative of the step's images, which the
+spectral I₂ of a 12 × 12 surface read as a drift of 1e-11 its resolution monitor did not see.
+What is stored is each B-spline coefficient over 120³, so that the basis is evaluated with
+whole-number coefficients (120× the uniform quintic basis and its derivatives in the cell's local
+t ∈ [0, 1), :data:`QUINTIC`): the derivatives are exact derivatives of the evaluated polynomials,
+with no rounded 1/120 between them.  Its error for a smooth field is O(Δ⁶).
 
 In a system the spline is the sympy function :class:`Field3` — ``Field3(X, Y, Z, s, a, b, c)`` is
 ∂ᵃ_X ∂ᵇ_Y ∂ᶜ_Z of the system's field number ``s`` — beside :class:`~integrators.splines.Field` in
@@ -78,34 +78,36 @@ QUINTIC = ((1, -5, 10, -10, 5, -1), (26, -50, 20, 20, -20, 5), (66, 0, -60, 0, 3
 
 
 def _not_a_knot(n):
-    """The (n + 2)² matrix whose solution is a sixth of the uniform cubic B-spline coefficients
-    c₋₁ … c_n interpolating n node values: c_{i−1} + 4c_i + c_{i+1} = 6 f_i, and the jump of the
-    third derivative (∝ c_{j−2} − 4c_{j−1} + 6c_j − 4c_{j+1} + c_{j+2}) zero at nodes 1 and n − 2."""
-    A = np.zeros((n + 2, n + 2))
+    """The (n + 4)² matrix whose solution is the uniform quintic B-spline coefficients c₋₂ … c_{n+1}
+    over 120 interpolating n node values: c_{i−2} + 26c_{i−1} + 66c_i + 26c_{i+1} + c_{i+2} = 120 f_i,
+    and the jump of the fifth derivative (∝ Σ_k (−1)ᵏ C(6, k + 3) c_{j+k}, k = −3 … 3) zero at nodes
+    1, 2, n − 3 and n − 2."""
+    A = np.zeros((n + 4, n + 4))
     for i in range(n):
-        A[i, i:i + 3] = (1.0, 4.0, 1.0)
-    A[n, 0:5] = (1.0, -4.0, 6.0, -4.0, 1.0)
-    A[n + 1, n - 3:n + 2] = (1.0, -4.0, 6.0, -4.0, 1.0)
+        A[i, i:i + 5] = (1.0, 26.0, 66.0, 26.0, 1.0)
+    jump = (1.0, -6.0, 15.0, -20.0, 15.0, -6.0, 1.0)
+    for row, j in enumerate((1, 2, n - 3, n - 2)):
+        A[n + row, j - 1:j + 6] = jump
     return A
 
 
 class Spline3:
-    """The interpolating tensor spline of ``values[i, j, k]`` = f(x[i], y[j], k·period/nz): cubic and
-    not-a-knot in x and y (regular grids of at least 6 points), quintic and periodic in z (nz ≥ 6
-    points over one period, starting at z = 0).
+    """The quintic interpolating tensor spline of ``values[i, j, k]`` = f(x[i], y[j], k·period/nz):
+    not-a-knot in x and y (regular grids of at least 8 points), periodic in z (nz ≥ 6 points over
+    one period, starting at z = 0).
 
-    ``coefficients[i + 1, j + 1, k + 2]`` is the B-spline coefficient over 720 of the basis function
-    centred on node (i, j, k), i = −1 … nx, j = −1 … ny, k = −2 … nz + 2 (k taken modulo nz: the
-    periodic coefficients are stored with two before and three after, so a cell's 4 × 4 × 6 block is
-    read without a wrap)."""
+    ``coefficients[i + 2, j + 2, k + 2]`` is the B-spline coefficient over 120³ of the basis function
+    centred on node (i, j, k), i = −2 … nx + 1, j = −2 … ny + 1, k = −2 … nz + 2 (k taken modulo nz:
+    the periodic coefficients are stored with two before and three after, so a cell's 6 × 6 × 6
+    block is read without a wrap)."""
 
     def __init__(self, x, y, period, values):
         x, y, values = (np.asarray(v, dtype=np.float64) for v in (x, y, values))
         period = float(period)
         if x.ndim != 1 or y.ndim != 1 or values.ndim != 3 or values.shape[:2] != (x.size, y.size):
             raise ValueError(f"a 3-D spline needs values of shape (len(x), len(y), nz), got {values.shape}")
-        if min(x.size, y.size) < 6 or values.shape[2] < 6:
-            raise ValueError(f"a 3-D spline needs at least 6 × 6 × 6 grid points, got {values.shape}")
+        if min(x.size, y.size) < 8 or values.shape[2] < 6:
+            raise ValueError(f"a 3-D spline needs at least 8 × 8 × 6 grid points, got {values.shape}")
         for name, v in (("x", x), ("y", y)):
             step = np.diff(v)
             if not (np.all(step > 0) and np.allclose(step, step[0], rtol=1e-9, atol=0)):
@@ -119,10 +121,10 @@ class Spline3:
         self.y0, self.dy = float(y[0]), float((y[-1] - y[0]) / (y.size - 1))
         self.z0, self.dz, self.period = 0.0, period / self.nz, period
         nx, ny, nz = self.nx, self.ny, self.nz
-        c = np.linalg.solve(_not_a_knot(nx), np.concatenate([values, np.zeros((2, ny, nz))]).reshape(nx + 2, -1))
-        c = c.reshape(nx + 2, ny, nz).transpose(1, 0, 2)
-        c = np.linalg.solve(_not_a_knot(ny), np.concatenate([c, np.zeros((2, nx + 2, nz))]).reshape(ny + 2, -1))
-        c = c.reshape(ny + 2, nx + 2, nz).transpose(1, 0, 2)
+        c = np.linalg.solve(_not_a_knot(nx), np.concatenate([values, np.zeros((4, ny, nz))]).reshape(nx + 4, -1))
+        c = c.reshape(nx + 4, ny, nz).transpose(1, 0, 2)
+        c = np.linalg.solve(_not_a_knot(ny), np.concatenate([c, np.zeros((4, nx + 4, nz))]).reshape(ny + 4, -1))
+        c = c.reshape(ny + 4, nx + 4, nz).transpose(1, 0, 2)
         w = 2 * np.pi * np.arange(nz) / nz      # the periodic quintic's circulant: (1, 26, 66, 26, 1)/120
         c = np.fft.ifft(np.fft.fft(c, axis=2) / (66.0 + 52.0 * np.cos(w) + 2.0 * np.cos(2 * w)), axis=2).real
         self.coefficients = np.ascontiguousarray(c[:, :, (np.arange(-2, nz + 3)) % nz])
@@ -142,17 +144,6 @@ class Spline3:
 
 
 # -- the evaluation's arithmetic: the same functions on numbers, lanes and numpy arrays ---------------
-
-def _weights_py(t, inv, inv2):
-    """6× the uniform cubic B-spline basis on a cell at its local t, and its first and second
-    derivatives in the coordinate (× 1/Δ, 1/Δ²)."""
-    w = (((3.0 - t) * t - 3.0) * t + 1.0, (3.0 * t - 6.0) * t * t + 4.0,
-         ((3.0 - 3.0 * t) * t + 3.0) * t + 1.0, t * t * t)
-    d = (((6.0 - 3.0 * t) * t - 3.0) * inv, ((9.0 * t - 12.0) * t) * inv,
-         ((6.0 - 9.0 * t) * t + 3.0) * inv, (3.0 * t * t) * inv)
-    s = ((6.0 - 6.0 * t) * inv2, (18.0 * t - 12.0) * inv2, (6.0 - 18.0 * t) * inv2, (6.0 * t) * inv2)
-    return w, d, s
-
 
 def _weights5_py(t, inv, inv2):
     """120× the uniform quintic B-spline basis on a cell at its local t (:data:`QUINTIC`), and its
@@ -186,33 +177,32 @@ def _zrow_py(c0, c1, c2, c3, c4, c5, wz):
             c0 * s[0] + c1 * s[1] + c2 * s[2] + c3 * s[3] + c4 * s[4] + c5 * s[5])
 
 
-def _yslab_py(r0, r1, r2, r3, wy):
-    """Four z-rows along y combined: the derivatives (b, c) = (0,0), (1,0), (2,0), (0,1), (1,1), (0,2)."""
+def _yslab_py(r0, r1, r2, r3, r4, r5, wy):
+    """Six z-rows along y combined: the derivatives (b, c) = (0,0), (1,0), (2,0), (0,1), (1,1), (0,2)."""
     w, d, s = wy
-    return (r0[0] * w[0] + r1[0] * w[1] + r2[0] * w[2] + r3[0] * w[3],
-            r0[0] * d[0] + r1[0] * d[1] + r2[0] * d[2] + r3[0] * d[3],
-            r0[0] * s[0] + r1[0] * s[1] + r2[0] * s[2] + r3[0] * s[3],
-            r0[1] * w[0] + r1[1] * w[1] + r2[1] * w[2] + r3[1] * w[3],
-            r0[1] * d[0] + r1[1] * d[1] + r2[1] * d[2] + r3[1] * d[3],
-            r0[2] * w[0] + r1[2] * w[1] + r2[2] * w[2] + r3[2] * w[3])
+    return (r0[0] * w[0] + r1[0] * w[1] + r2[0] * w[2] + r3[0] * w[3] + r4[0] * w[4] + r5[0] * w[5],
+            r0[0] * d[0] + r1[0] * d[1] + r2[0] * d[2] + r3[0] * d[3] + r4[0] * d[4] + r5[0] * d[5],
+            r0[0] * s[0] + r1[0] * s[1] + r2[0] * s[2] + r3[0] * s[3] + r4[0] * s[4] + r5[0] * s[5],
+            r0[1] * w[0] + r1[1] * w[1] + r2[1] * w[2] + r3[1] * w[3] + r4[1] * w[4] + r5[1] * w[5],
+            r0[1] * d[0] + r1[1] * d[1] + r2[1] * d[2] + r3[1] * d[3] + r4[1] * d[4] + r5[1] * d[5],
+            r0[2] * w[0] + r1[2] * w[1] + r2[2] * w[2] + r3[2] * w[3] + r4[2] * w[4] + r5[2] * w[5])
 
 
-def _xcomb_py(u0, u1, u2, u3, wx):
-    """Four y-slabs along x combined: the ten derivatives of :data:`DERIVATIVES3`."""
+def _xcomb_py(u0, u1, u2, u3, u4, u5, wx):
+    """Six y-slabs along x combined: the ten derivatives of :data:`DERIVATIVES3`."""
     w, d, s = wx
-    return (u0[0] * w[0] + u1[0] * w[1] + u2[0] * w[2] + u3[0] * w[3],
-            u0[0] * d[0] + u1[0] * d[1] + u2[0] * d[2] + u3[0] * d[3],
-            u0[1] * w[0] + u1[1] * w[1] + u2[1] * w[2] + u3[1] * w[3],
-            u0[3] * w[0] + u1[3] * w[1] + u2[3] * w[2] + u3[3] * w[3],
-            u0[0] * s[0] + u1[0] * s[1] + u2[0] * s[2] + u3[0] * s[3],
-            u0[1] * d[0] + u1[1] * d[1] + u2[1] * d[2] + u3[1] * d[3],
-            u0[3] * d[0] + u1[3] * d[1] + u2[3] * d[2] + u3[3] * d[3],
-            u0[2] * w[0] + u1[2] * w[1] + u2[2] * w[2] + u3[2] * w[3],
-            u0[4] * w[0] + u1[4] * w[1] + u2[4] * w[2] + u3[4] * w[3],
-            u0[5] * w[0] + u1[5] * w[1] + u2[5] * w[2] + u3[5] * w[3])
+    return (u0[0] * w[0] + u1[0] * w[1] + u2[0] * w[2] + u3[0] * w[3] + u4[0] * w[4] + u5[0] * w[5],
+            u0[0] * d[0] + u1[0] * d[1] + u2[0] * d[2] + u3[0] * d[3] + u4[0] * d[4] + u5[0] * d[5],
+            u0[1] * w[0] + u1[1] * w[1] + u2[1] * w[2] + u3[1] * w[3] + u4[1] * w[4] + u5[1] * w[5],
+            u0[3] * w[0] + u1[3] * w[1] + u2[3] * w[2] + u3[3] * w[3] + u4[3] * w[4] + u5[3] * w[5],
+            u0[0] * s[0] + u1[0] * s[1] + u2[0] * s[2] + u3[0] * s[3] + u4[0] * s[4] + u5[0] * s[5],
+            u0[1] * d[0] + u1[1] * d[1] + u2[1] * d[2] + u3[1] * d[3] + u4[1] * d[4] + u5[1] * d[5],
+            u0[3] * d[0] + u1[3] * d[1] + u2[3] * d[2] + u3[3] * d[3] + u4[3] * d[4] + u5[3] * d[5],
+            u0[2] * w[0] + u1[2] * w[1] + u2[2] * w[2] + u3[2] * w[3] + u4[2] * w[4] + u5[2] * w[5],
+            u0[4] * w[0] + u1[4] * w[1] + u2[4] * w[2] + u3[4] * w[3] + u4[4] * w[4] + u5[4] * w[5],
+            u0[5] * w[0] + u1[5] * w[1] + u2[5] * w[2] + u3[5] * w[3] + u4[5] * w[4] + u5[5] * w[5])
 
 
-_weights = njit(cache=True, error_model="numpy")(_weights_py)
 _weights5 = njit(cache=True, error_model="numpy")(_weights5_py)
 _zrow = njit(cache=True, error_model="numpy")(_zrow_py)
 _yslab = njit(cache=True, error_model="numpy")(_yslab_py)
@@ -241,14 +231,14 @@ def field3_np(k, s, x, y, z, P=0):
         j = np.where(np.isfinite(yr), np.clip(np.floor((yr - y0) / dy), 0, ny - 2), 0).astype(np.int64)
         kf = np.where(np.isfinite(zr), np.floor((zr - z0) / dz), 0.0)
     kz = (kf - nz * np.floor(kf / nz)).astype(np.int64)
-    SY, SX = nz + 5, (ny + 2) * (nz + 5)
+    SY, SX = nz + 5, (ny + 4) * (nz + 5)
     start = base + HEADER3 + i * SX + j * SY + kz
-    wx = _weights_py((x - (x0 + i * dx)) * ix, ix, ix * ix)
-    wy = _weights_py((y - (y0 + j * dy)) * iy, iy, iy * iy)
+    wx = _weights5_py((x - (x0 + i * dx)) * ix, ix, ix * ix)
+    wy = _weights5_py((y - (y0 + j * dy)) * iy, iy, iy * iy)
     wz = _weights5_py((z - (z0 + kf * dz)) * iz, iz, iz * iz)
     u = []
-    for a in range(4):
-        rows = [_zrow_py(*(k[start + a * SX + b * SY + c] for c in range(6)), wz) for b in range(4)]
+    for a in range(6):
+        rows = [_zrow_py(*(k[start + a * SX + b * SY + c] for c in range(6)), wz) for b in range(6)]
         u.append(_yslab_py(*rows, wy))
     return _xcomb_py(*u, wx)
 
@@ -284,7 +274,7 @@ def _locate3(k, base, xr, yr, zr):
         kf = np.floor((zr - z0) / dz)
     kz = int(kf - nz * np.floor(kf / nz))
     SY = nz + 5
-    SX = (ny + 2) * SY
+    SX = (ny + 4) * SY
     return base + HEADER3 + i * SX + j * SY + kz, x0 + i * dx, y0 + j * dy, z0 + kf * dz, SX, SY
 
 
@@ -297,14 +287,15 @@ def _row(k, p, o, wz):
 @njit(cache=True, error_model="numpy")
 def _slab(k, p, off, SY, wy, wz):
     return _yslab(_row(k, p, off, wz), _row(k, p, off + SY, wz), _row(k, p, off + 2 * SY, wz),
-                  _row(k, p, off + 3 * SY, wz), wy)
+                  _row(k, p, off + 3 * SY, wz), _row(k, p, off + 4 * SY, wz), _row(k, p, off + 5 * SY, wz), wy)
 
 
 @njit(cache=True, error_model="numpy")
 def _evaluate3(k, p, SX, SY, wx, wy, wz):
     """The ten derivatives from the block at p (an index, or a Vec of them) with the three axes' weights."""
     return _xcomb(_slab(k, p, 0, SY, wy, wz), _slab(k, p, SX, SY, wy, wz), _slab(k, p, 2 * SX, SY, wy, wz),
-                  _slab(k, p, 3 * SX, SY, wy, wz), wx)
+                  _slab(k, p, 3 * SX, SY, wy, wz), _slab(k, p, 4 * SX, SY, wy, wz), _slab(k, p, 5 * SX, SY, wy, wz),
+                  wx)
 
 
 @njit(cache=True, error_model="numpy")
@@ -313,7 +304,7 @@ def _field3_scalar(k, P, s, x, y, z):
     base = P + int(k[P + s])
     p, xi, yj, zk, SX, SY = _locate3(k, base, re(x), re(y), re(z))
     ix, iy, iz = k[base + 9], k[base + 10], k[base + 11]
-    return _evaluate3(k, p, SX, SY, _weights((x - xi) * ix, ix, ix * ix), _weights((y - yj) * iy, iy, iy * iy),
+    return _evaluate3(k, p, SX, SY, _weights5((x - xi) * ix, ix, ix * ix), _weights5((y - yj) * iy, iy, iy * iy),
                       _weights5((z - zk) * iz, iz, iz * iz))
 
 
@@ -339,7 +330,7 @@ def _field3_ov(k, P, s, x, y, z):
                 tx = _vset(tx, l, (xr - xi) * ix)
                 ty = _vset(ty, l, (yr - yj) * iy)
                 tz = _vset(tz, l, (zr - zk) * iz)
-            return _evaluate3(k, starts, SX, SY, _weights(tx, ix, ix * ix), _weights(ty, iy, iy * iy),
+            return _evaluate3(k, starts, SX, SY, _weights5(tx, ix, ix * ix), _weights5(ty, iy, iy * iy),
                               _weights5(tz, iz, iz * iz))
         return lanes
     if isinstance(x, DDVec) and isinstance(y, DDVec) and isinstance(z, DDVec):

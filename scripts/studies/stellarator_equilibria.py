@@ -146,7 +146,8 @@ def study(name: str, path: Path, steps: int, scene_steps: int, work: Path) -> di
         cmd = ([sys.executable, "-m", "integrators.cli"] if ranks == 1 else
                [str(Path(sys.executable).with_name("mpiexec")), "-n", "2", sys.executable, "-m", "integrators.cli"])
         t0 = time.perf_counter()
-        p = subprocess.run(cmd + ["run", str(scene), "-o", str(out)], capture_output=True, text=True, cwd=work)
+        p = subprocess.run(cmd + ["run", str(scene), "-o", str(out), "--force"], capture_output=True, text=True,
+                           cwd=work)
         if p.returncode:
             print(p.stderr[-2000:], file=sys.stderr)
         runs[ranks] = {"rc": p.returncode, "wall_s": time.perf_counter() - t0, "out": p.stdout[-6000:],
@@ -155,7 +156,8 @@ def study(name: str, path: Path, steps: int, scene_steps: int, work: Path) -> di
     row["scene_table"] = runs[1]["out"]
     row["scene_statuses"] = [ln.split()[1] for ln in runs[1]["out"].splitlines()
                              if ln[:5] in ("GLRK1", "GLRK2") and len(ln.split()) > 2]
-    row["scene_same_bits"] = _same_bits(work / f"{name}_1.h5", work / f"{name}_2.h5")
+    row["scene_same_bits"] = (_same_bits(work / f"{name}_1.h5", work / f"{name}_2.h5")
+                              if all(v["rc"] == 0 for v in runs.values()) else None)
     return row
 
 
