@@ -197,8 +197,8 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
     centres started on a circle of radius 0.02 r₁ about the axis (their orbits come to 0.0033 r₁ of
     it), one started on the axis itself, and the default passing and trapped ones; 4,000 steps of
     the default h.  No point breaks down; P_ζ is kept to round-off by the axis family (measured ≤
-    1.9e-14 relative) and by every orbit under the standard projection (1.2e-14), which keeps momentum
-    maps exactly (the symmetric projection does not: 9.5e-13 with GLRK2, 8.5e-13 with GLRK4 for the
+    1.9e-14 relative) and by every orbit under the standard projection (1.5e-14), which keeps momentum
+    maps exactly (the symmetric projection does not: 4.0e-13 with GLRK2, 1.6e-12 with GLRK4 for the
     default orbits, as on the Solov'ev system in test_systems.py); the axis family's energy too
     (measured ≤ 5.4e-14; the passing orbit's energy error is the method's truncation, 1.1e-9 for GLRK2)."""
     sy, bz = circular_system, circular_system.boozer
