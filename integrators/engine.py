@@ -382,7 +382,8 @@ class Tolerances:
     def array(self, double_double=False, unknowns=0) -> np.ndarray:
         """The rule as the kernel reads it for a pair of ``unknowns`` Newton unknowns: one float64
         array in the order of the kernel's :data:`~integrators.kernel.Newton` record (its one owner),
-        filled by name.  With ``double_double``, tol, stall, the refresh floor and the trust floor scaled from
+        filled by name.  With ``double_double``, tol, stall, the refresh floor, the trust floor and the
+        64 ulps below which an update that stops halving is round-off (``fine``) scaled from
         double's eps to 2⁻¹⁰⁴ (the same rule, one number type down)."""
         from .kernel import Newton
         scale = 2.0 ** -104 / np.finfo(np.float64).eps if double_double else 1.0
@@ -398,7 +399,8 @@ class Tolerances:
                       trust=self.trust if fresh else -1.0,
                       age=float(self.jacobian_age), every=float(self.jacobian_every),
                       least=2.0 if defects else 1.0, rec=float(self.recurrence) if defects else 0.0,
-                      carry=max(self.trust_floor, self.refresh_floor) * scale if defects else 0.0)
+                      carry=max(self.trust_floor, self.refresh_floor) * scale if defects else 0.0,
+                      fine=64 * np.finfo(np.float64).eps * scale)
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 

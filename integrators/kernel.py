@@ -163,6 +163,7 @@ Scratch.__doc__ = "Offsets (in logical elements; × W in memory) of the scratch 
 Flags = namedtuple("Flags", [
     "scale", "pscale",            # every unknown relative to its coordinate's size (nz, d)
     "done", "ok", "stale", "prev", "its", "norm", "nan", "finite",   # Newton's per-lane bookkeeping
+    "exact",                      # the last iteration's factors were taken at its own iterate (_judge)
     "have", "hist", "live", "active", "okstep", "tbrk", "itn", "stp",   # the points' step flags
     "jn",                         # the steps a lane's point has taken in this call
     "depth",                      # the predictor's defects the lane's point holds (0 … DEPTH)
@@ -211,7 +212,7 @@ def layout(s, d, nz):
 
 
 Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age every least rec "
-                               "carry")
+                               "carry fine")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
@@ -227,7 +228,8 @@ starts its Newton from a Jacobian at the guess instead of the factors carried fr
 (negative: never) once those factors are ``age`` steps old, at the steps whose number is a multiple of
 ``every`` (so the lanes of a group take theirs together); a lane converges at its ``least``-th
 iteration at the earliest (2 with the defects: the guess itself is never the solution); ``rec``
-coefficients (0: none) of the defects' fitted linear recurrence (:func:`_recurrence`)."""
+coefficients (0: none) of the defects' fitted linear recurrence (:func:`_recurrence`); an update of at most
+``fine`` (64 ulps of the number type) that stops halving is at the round-off floor (:func:`_judge`)."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
                                         "lu piv have_lu jac_z jac_q jac_lam defects orders")
@@ -264,7 +266,8 @@ def _records(lay):
 
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14], c[15])
+    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14], c[15],
+                  c[16])
 
 
 @njit(inline='always', **_OPTS)
@@ -718,9 +721,14 @@ def _update(z, r, done, scale, nz, f, F):
 
 
 @njit(inline='always', **_OPTS)
-def _judge(f, F, tol, stall, refresh, floor, horizon, least):
+def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
     """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol,
-    or ≤ stall once the update stops halving, from its ``least``-th iteration on: with the defects'
+    or ≤ stall once the update stops halving: within ``fine`` (64 ulps), or wherever the
+    iteration before was a Newton step with a Jacobian at its own iterate, after which the update
+    falls quadratically unless round-off stops it; factors carried from an earlier step or iterate
+    can stop halving far above the floor, or even grow, when the guess was poor: stopping there
+    left errors of 10⁴ ulps of one sign in single steps (tests/test_boozer.py), so such a lane
+    takes a fresh Jacobian and goes on; from its ``least``-th iteration on: with the defects'
     guess 2, because at small steps that guess is often within tol already, and taking it, not the
     iterate after it, left its extrapolation error, a few ulps of the same sign, in every step:
     SRK3-standard on point vortices at h = 2⁻¹³, 16,384 steps, momentum off by 1.0·10⁻¹³ against
@@ -737,7 +745,8 @@ def _judge(f, F, tol, stall, refresh, floor, horizon, least):
     failed = mor(mor(ld(f, F.nan) != 0.0, ld(f, F.finite) == 0.0), mnot(np.isfinite(sz)))
     theta = sel(np.isfinite(prev), sz / prev, np.inf)
     slow = mand(np.isfinite(theta), theta > 0.5)
-    converged = mand(mand(mnot(failed), mor(sz <= tol, mand(sz <= stall, slow))), ld(f, F.its) >= least)
+    floored = mand(mand(sz <= stall, slow), mor(ld(f, F.exact) != 0.0, sz <= fine))
+    converged = mand(mand(mnot(failed), mor(sz <= tol, floored)), ld(f, F.its) >= least)
     ends = mand(on, mor(failed, converged))
     goes = mand(on, mnot(ends))
     st(f, F.done, sel(ends, 1.0, ld(f, F.done)))
@@ -747,7 +756,8 @@ def _judge(f, F, tol, stall, refresh, floor, horizon, least):
         left = sz
         for _ in range(int(horizon)):
             left = left * theta
-    tired = mand(mand(np.isfinite(theta), theta > refresh), mand(sz > floor, left > tol))
+    tired = mand(mand(np.isfinite(theta), theta > refresh), mand(mor(sz > floor, slow), left > tol))   # slow: not floored
+    st(f, F.exact, sel(goes, ld(f, F.stale), ld(f, F.exact)))     # this iteration's: the next one's judge
     st(f, F.stale, sel(goes, sel(tired, 1.0, 0.0), ld(f, F.stale)))
     st(f, F.prev, sel(goes, sz, prev))
 
@@ -760,7 +770,8 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
     (its post term ``P.post``: :func:`project` for the paper's).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
     ``known``: LU and piv hold its last step's factors) and again after an iteration that shrank
     its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ STALL once the
-    update stops halving, or ≤ TOL (0 by default: every step ends at its round-off floor, so what
+    update stops halving within 64 ulps or after an exact Newton step (older factors that stop
+    halving above that are refreshed, not taken for the floor: :func:`_judge`), or ≤ TOL (0 by default: every step ends at its round-off floor, so what
     it leaves is round-off and not a remainder of one sign: Brouwer's law, docs/brouwer.md); for complex z the imaginary part, read as a derivative, must pass the
     same test.  A lane that is done is held at its solution ``zev`` (the last iterate at which its
     residual was evaluated; every buffer the equations fill holds that evaluation) while the others
@@ -778,6 +789,7 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
     st(f, F.its, 0.0)
     st(f, F.prev, np.inf)
     st(f, F.stale, sel(mand(active, mnot(known)), 1.0, 0.0))
+    st(f, F.exact, 0.0)
     scale = at(f, F.scale if mode == MODE_MAIN else F.pscale)
     Jt = at(w, S.Jt if mode == MODE_MAIN else S.pJ)
     pivt = at(ip, IP.pivt)
@@ -807,7 +819,8 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
         lu_solve(LU, piv, r, nz)                  # r is now −δ
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         _update(z, r, done, scale, nz, f, F)
-        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, refresh, cfg.floor, cfg.horizon, cfg.least)
+        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, cfg.fine, refresh, cfg.floor, cfg.horizon,
+               cfg.least)
     for l in range(W):                            # lanes out of iterations
         if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)

@@ -196,11 +196,11 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
     """The circular tokamak (n = 0 only: ∂/∂ζ is a symmetry, P_ζ = ρG − ψ_p): eight trapped guiding
     centres started on a circle of radius 0.02 r₁ about the axis (their orbits come to 0.0033 r₁ of
     it), one started on the axis itself, and the default passing and trapped ones; 4,000 steps of
-    the default h.  No point breaks down; P_ζ is kept to round-off by the axis family (measured ≤
-    1.9e-14 relative) and by every orbit under the standard projection (1.5e-14), which keeps momentum
-    maps exactly (the symmetric projection does not: 4.0e-13 with GLRK2, 1.6e-12 with GLRK4 for the
-    default orbits, as on the Solov'ev system in test_systems.py); the axis family's energy too
-    (measured ≤ 5.4e-14; the passing orbit's energy error is the method's truncation, 1.1e-9 for GLRK2)."""
+    the default h.  No point breaks down; P_ζ is kept to round-off by every orbit under every pair
+    (the default orbits: measured ≤ 3.4e-14 relative; 4.0e-13 and 1.6e-12 under GLRK2- and
+    GLRK4-symmetric were steps whose Newton stopped short of the floor, test below); the axis
+    family's energy too (measured ≤ 5.4e-14; the passing orbit's energy error is the method's
+    truncation, 1.1e-9 for GLRK2)."""
     sy, bz = circular_system, circular_system.boozer
     d = sy.defaults
     r1 = np.sqrt(2 * bz.psi0)
@@ -213,8 +213,7 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
     E = np.stack([sy.H(sol.q[:, i]) for i in range(len(q0))])
     P = np.stack([sy.momentum(sol.q[:, i]) for i in range(len(q0))])
     dP = np.abs(P - P[:, :1]).max(1) / np.abs(P[:, 0])
-    assert dP[:9].max() < 1e-13
-    assert dP.max() < (1e-13 if projection == "standard" else 1e-11)
+    assert dP.max() < 1e-13
     assert np.max(np.abs(E[:9] / E[:9, :1] - 1)) < 5e-13
     r = np.hypot(sol.q[..., 0], sol.q[..., 1])
     assert r[:, :8].min() < 0.005 * r1                      # the family does come close to the axis
@@ -290,3 +289,27 @@ def test_the_li383_scene_gives_the_same_bits_on_2_ranks(tmp_path):
         assert r.returncode == 0, r.stderr[-2000:]
         files.append(dump(out))
     assert same(*files)
+
+
+@pytest.mark.slow
+def test_no_step_stops_short_of_the_round_off_floor():
+    """Newton's stall test stops a lane whose update no longer halves, taking that for round-off; with
+    factors carried from an earlier step or iterate an update can stop halving far above it. On the
+    circular tokamak's scene loop (64 of its points, the default grid and h, 400 steps),
+    GLRK1-symmetric moved P_ζ, a constant of the discrete motion, by up to 1.7e-11 (relative) in
+    single steps, 10⁴ ulps of one sign (GLRK2: 2.0e-12), and in the QA equilibrium the scene's I₁
+    by jumps of 10⁻⁹ (docs/stellarators.md); with the stall test taken only under a Jacobian at the
+    iterate (or below the refresh floor) no step moves it by more than 1.0e-14 (measured)."""
+    import tomllib
+    from integrators.service.scene import boozer_scene
+    sy = system_from_boozer(CIRCULAR)
+    lp = tomllib.loads(boozer_scene(CIRCULAR))["loop"]["params"]
+    a = 2 * np.pi * np.arange(0, 512, 8) / 512
+    q0 = np.tile(lp["center"], (a.size, 1))
+    q0[:, 0] += lp["radii"][0] * np.cos(a)
+    q0[:, 1] += lp["radii"][1] * np.sin(a)
+    sol = integrators.integrate(sy, q0, tableau="GLRK1", projection="symmetric", h=sy.defaults["h"], steps=400,
+                                save_every=1)
+    assert np.isinf(sol.breakdown_time).all()
+    P = np.stack([sy.momentum(sol.q[:, i]) for i in range(a.size)])
+    assert np.max(np.abs(np.diff(P, axis=1)) / np.abs(P[:, :1])) < 1e-13

@@ -279,7 +279,7 @@ def test_compile_kernels_names_the_children_that_failed():
 
 def test_one_specialisation_names_what_a_call_compiles():
     """Engine._specialise: a real state of 20 points takes double in 8 lanes, a complex one complex
-    step in 1, a double-double one 8 lanes with Newton's TOL and STALL scaled from eps to 2⁻¹⁰⁴ (the
+    step in 1, a double-double one 8 lanes with Newton's tol, stall and floors scaled from eps to 2⁻¹⁰⁴ (the
     rest of the rule as is) and a prototype of double zeros; 16 lanes for double-double are refused."""
     import integrators
     from integrators.engine import Engine, Specialisation
@@ -295,7 +295,7 @@ def test_one_specialisation_names_what_a_call_compiles():
     assert (spec.number, spec.lanes, spec.proto) == ("double-double", 8, (0.0,) * 8)
     scale = 2.0 ** -104 / np.finfo(float).eps
     from integrators.kernel import Newton
-    scaled = [Newton._fields.index(n) for n in ("tol", "stall", "floor", "carry")]
+    scaled = [Newton._fields.index(n) for n in ("tol", "stall", "floor", "carry", "fine")]
     same = [i for i in range(len(Newton._fields)) if i not in scaled]
     assert np.array_equal(spec.newton[scaled], real.newton[scaled] * scale)
     assert np.array_equal(spec.newton[same], real.newton[same])
