@@ -47,3 +47,29 @@ def test_the_audit_tells_the_chart_switch_from_the_axis_chart():
         verdicts[name] = (c["drift"]["I1/noncanonical"]["verdict"], c["defect"]["noncanonical"]["verdict"])
     assert verdicts["axis"] == ("round-off", "symplectic"), verdicts
     assert verdicts["switch"][0] == "broke down" or verdicts["switch"][1] != "symplectic", verdicts
+
+
+@pytest.mark.slow
+def test_the_chart_switch_audit_runs_from_the_command_line(tmp_path):
+    """scripts/examples/chart_switch_maps.py through ``poincare audit --map``, as its docstring gives
+    the commands: the axis chart reads round-off and symplectic, the switching map broke down or
+    not symplectic (the same verdicts as the Python audit above)."""
+    import json
+    import subprocess
+    import sys
+    root = Path(__file__).parents[1]
+    m = "scripts/examples/chart_switch_maps.py"
+    tail = ["--h", "2.7", "--steps", "400", "--output-every", "4", "--loop-points", "256", "--radius", "0.00465",
+            "--plane", "0", "1", "--points", "2", "--levels", "2", "--quiet"]
+    verdicts = {}
+    for name, chart in (("axis", "axis"), ("switch", "polar")):
+        out = tmp_path / f"{name}.json"
+        cmd = [sys.executable, "-m", "integrators.cli", "audit", "--map", f"{m}:{name}_step", "--theta",
+               f"{m}:{chart}_theta", "--point", f"{m}:{chart}_point", "--energy", f"{m}:{chart}_energy",
+               *(["--period", "0", str(2 * np.pi), "0", "0"] if name == "switch" else []), *tail, "--json", str(out)]
+        p = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
+        assert p.returncode in (0, 1), p.stderr[-2000:]
+        c = json.loads(out.read_text())["candidates"][0]
+        verdicts[name] = (c["drift"]["I1/noncanonical"]["verdict"], c["defect"]["noncanonical"]["verdict"])
+    assert verdicts["axis"] == ("round-off", "symplectic"), verdicts
+    assert verdicts["switch"][0] == "broke down" or verdicts["switch"][1] != "symplectic", verdicts

@@ -14,6 +14,7 @@ axis chart (:mod:`integrators.boozer`, where nothing is singular at the axis):
 * :func:`switch_step` — one step of an engine pair in that chart, then (r, θ) → (−r, θ + π) where
   r < 0: the chart switch.
 * :func:`axis_step` — one step of the same pair in the axis chart.
+* :func:`closest_start` — the start whose orbit passes the axis closest, for the audit.
 
 What the switch does, measured on the circular tokamak file (docs/stellarators.md, "The chart
 switch"): guiding centres whose orbits pass the axis closely keep their energy to round-off in the
@@ -115,3 +116,17 @@ def axis_family(axis_system, n=64, spread=1.5, radius=0.02):
     ang = np.linspace(0.0, spread, n)
     rho = axis_system.defaults["trapped"][3]
     return np.stack([radius * r1 * np.cos(ang), radius * r1 * np.sin(ang), 0 * ang, rho + 0 * ang], 1)
+
+
+def closest_start(axis_system, steps=2000, tableau="GLRK2", projection="symmetric"):
+    """The point of :func:`axis_family` whose orbit, ``steps`` steps of the pair at the defaults' h in
+    the axis chart, passes the magnetic axis closest: the start of the audit that tells the two
+    charts apart (``poincare audit --map``: scripts/examples/chart_switch_maps.py)."""
+    q = axis_family(axis_system)
+    start = q.copy()
+    step, h = axis_step(axis_system, tableau, projection), axis_system.defaults["h"]
+    closest = np.hypot(q[:, 0], q[:, 1])
+    for _ in range(steps):
+        q = step(q, h)
+        closest = np.fmin(closest, np.hypot(q[:, 0], q[:, 1]))
+    return start[int(np.nanargmin(closest))]

@@ -1,6 +1,6 @@
 """The chart switch at the axis, SIMPLE's way, against the axis chart (docs/stellarators.md, "The chart switch").
 
-On simsopt's circular tokamak file: 64 trapped guiding centres started on an arc of 0.02 r₁ about the
+On simsopt's circular tokamak file (or ``--file``, any boozmn file: li383 for the shipped NCSX-like one): 64 trapped guiding centres started on an arc of 0.02 r₁ about the
 magnetic axis (their orbits pass it at distances down to 1e-5 r₁), ``--steps`` steps of GLRK2-symmetric at the
 file's default h, in the axis chart (x, y, ζ, ρ) and in the polar chart (r, θ, ζ, ρ) with the switch
 (r, θ) → (−r, θ + π) after a step that ends at r < 0 (integrators/audit/chart_switch.py): the energy error of
@@ -8,6 +8,7 @@ each, the switches and the breakdowns; then the audit of both maps on a loop abo
 closest to the axis (``audit_map``: the drift of I₁, the energy, the one-step defect).
 
     python scripts/studies/chart_switch.py            # about a minute after compilation
+    python scripts/studies/chart_switch.py --file li383   # the same in the NCSX-like field (nfp 3)
 """
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ from integrators.audit.chart_switch import axis_family, axis_step, polar_system,
 from integrators.audit.maps import audit_map
 from integrators.audit.report import text_report
 
-CIRCULAR = Path(integrators.__file__).parent / "service" / "scenes" / "boozmn_circular_tokamak.nc"
+SCENES = Path(integrators.__file__).parent / "service" / "scenes"
+SHIPPED = {"circular": SCENES / "boozmn_circular_tokamak.nc", "li383": SCENES / "boozmn_li383_low_res.nc"}
 
 
 def energies(axis, polar, steps):
@@ -45,10 +47,14 @@ def energies(axis, polar, steps):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--file", default="circular",
+                    help="a boozmn file, or 'circular' / 'li383' for the shipped ones (default circular)")
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--audit-steps", type=int, default=400)
     args = ap.parse_args(argv)
-    polar, axis = polar_system(CIRCULAR)
+    path = SHIPPED.get(args.file, args.file)
+    polar, axis = polar_system(path)
+    print(f"{Path(path).name}: {len(polar.fields) - 3} modes in the polar chart")
     t0 = time.perf_counter()
     e = energies(axis, polar, args.steps)
     r1 = np.sqrt(2 * axis.param_values["psi_edge"])
