@@ -33,6 +33,15 @@ from ..splines import Field1, Spline1
 RADIAL_NODES = 221          # nodes of the modes' splines in r over [0, 1.1 r₁]
 
 
+def boozmn_path(spec):
+    """``"circular"`` or ``"li383"``: the shipped boozmn files (integrators/service/scenes/); any other
+    string is a path."""
+    from pathlib import Path
+    scenes = Path(__file__).parents[1] / "service" / "scenes"
+    shipped = {"circular": scenes / "boozmn_circular_tokamak.nc", "li383": scenes / "boozmn_li383_low_res.nc"}
+    return shipped.get(spec, Path(spec))
+
+
 def polar_system(path, mu=None, modes_tol=1e-4):
     """(the guiding centre of a boozmn file in the polar chart (module docstring), the same in the
     axis chart): parameters, profiles and defaults as :func:`~integrators.boozer.system_from_boozer`'s."""

@@ -26,22 +26,17 @@ from __future__ import annotations
 
 import functools
 import os
-from pathlib import Path
 
 import numpy as np
 
-import integrators
 from integrators.audit.chart_switch import axis_step as _axis_step
-from integrators.audit.chart_switch import closest_start, polar_system, switch_step as _switch_step, to_polar
-
-SCENES = Path(integrators.__file__).parent / "service" / "scenes"
-SHIPPED = {"circular": SCENES / "boozmn_circular_tokamak.nc", "li383": SCENES / "boozmn_li383_low_res.nc"}
+from integrators.audit.chart_switch import boozmn_path, closest_start, polar_system, switch_step as _switch_step, \
+    to_polar
 
 
 @functools.lru_cache(maxsize=None)
 def _systems():
-    spec = os.environ.get("BOOZMN", "circular")
-    polar, axis = polar_system(SHIPPED.get(spec, spec))
+    polar, axis = polar_system(boozmn_path(os.environ.get("BOOZMN", "circular")))
     return polar, axis, _axis_step(axis), _switch_step(polar), closest_start(axis)
 
 

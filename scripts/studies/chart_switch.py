@@ -18,13 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-import integrators
-from integrators.audit.chart_switch import axis_family, axis_step, polar_system, switch_step, to_polar
+from integrators.audit.chart_switch import axis_family, axis_step, boozmn_path, polar_system, switch_step, to_polar
 from integrators.audit.maps import audit_map
 from integrators.audit.report import text_report
 
-SCENES = Path(integrators.__file__).parent / "service" / "scenes"
-SHIPPED = {"circular": SCENES / "boozmn_circular_tokamak.nc", "li383": SCENES / "boozmn_li383_low_res.nc"}
 
 
 def energies(axis, polar, steps):
@@ -52,7 +49,7 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--audit-steps", type=int, default=400)
     args = ap.parse_args(argv)
-    path = SHIPPED.get(args.file, args.file)
+    path = boozmn_path(args.file)
     polar, axis = polar_system(path)
     print(f"{Path(path).name}: {len(polar.fields) - 3} modes in the polar chart")
     t0 = time.perf_counter()
