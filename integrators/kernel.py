@@ -44,7 +44,7 @@ from .ddouble import DDType, dd
 # where ϑ and its derivatives are evaluated (the point slots of the scratch and a projection's
 # `at`), and the perturbation before Ψ_h: codes owned by integrators.projections
 from .projections import END, MIDPOINT, PRE_NONE, PRE_PREVIOUS, PRE_UNKNOWN, START  # noqa: F401 (PRE_NONE: the codes by name)
-from .simd import DDVec, LanePtr, _at, anyl, at, elem, elem3, is_complex, ld, ldi, lget, lanes, lmask, lset, mand, \
+from .simd import DDVec, LanePtr, Vec, _at, anyl, at, elem, elem3, is_complex, ld, ldi, lget, lanes, lmask, lset, mand, \
     mnot, mor, nlanes, plain, put, put3, raw, re, sel, st, sti, step_measure
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
@@ -138,16 +138,39 @@ def _lobatto_ratio(c, i, like):
     return lambda c, i, like: c.d[i] / c.b[i]
 
 
+def exact_points(like):
+    """Whether the equations see the points they are evaluated at exactly (a compile-time constant):
+    in plain doubles a point q̄ + x is rounded to double, and what the rounding drops, e (:func:`rounding`),
+    enters the residual as ϑ_q e, so that the residual resolves every increment to its own size
+    (:func:`_residual`); double-double values carry their own low part and complex-step values a
+    derivative, so there the points are taken as they are."""
+
+
+@overload(exact_points, inline="always")
+def _exact_points(like):
+    yes = isinstance(like, (Vec, types.Float))
+    return lambda like: yes
+
+
+@njit(inline='always', **_OPTS)
+def rounding(a, b, s):
+    """(a + b) − s exactly, for s = fl(a + b) (Knuth's TwoSum)."""
+    bb = s - a
+    return (a - (s - bb)) + (b - bb)
+
+
 # -- the scratch: named offsets into one buffer per group of W points ---------------------------
 
 Scratch = namedtuple("Scratch", [
     # stage values: Q_i, ϑ(Q_i), ϑ_q, ϑ_qq, ∇H, ∇²H, G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i), K_i = ∂G_i/∂Q_i
     "Q", "th", "T", "TT", "dH", "HH", "G", "K",
+    # ϑ_q(Q_i) e_i: the linear part of ϑ over Q_i's rounding error e_i (:func:`_stages`, plain doubles)
+    "tE",
     # the point slots START, MIDPOINT, END: ϑ, ϑ_q, ϑ_qq, ∇H, ∇²H
     "pth", "pT", "pTT", "pdH", "pHH",
     # d-vectors
     "qbar", "pbar", "q0", "pb", "sY", "sG", "q1", "p1", "mid", "tl", "qh", "ph", "vf", "inc", "qn", "qcn", "pn",
-    "pcn", "ln", "sYs", "qr",
+    "pcn", "ln", "sYs", "eQ", "qbe", "qhe", "pbe", "pwe", "phe", "qr",
     # Newton: unknowns, evaluated iterate, residual, fresh Jacobian, projection's Newton, guesses
     "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess",
     # the predictor: this step's base guess (stages, Λ, μ) and the last steps' defects from theirs
@@ -199,7 +222,7 @@ def layout(s, d, nz):
     turns back into the records (:func:`_records`: numba's parallel loop takes no named tuples)."""
     dd, sd = d * d, s * d
     S = _offsets(Scratch, dict(
-        Q=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
+        Q=sd, tE=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
         pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
         **dict.fromkeys(D_VECTORS, d),
         z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd + 2 * d,
@@ -410,6 +433,16 @@ def _tapply(T, v, out, d):
 
 
 @njit(inline='always', **_OPTS)
+def _apply(T, v, out, d):
+    """out_l = Σ_m T[l, m] v_m  (ϑ_q v)."""
+    for l in range(d):
+        acc = ld(T, l * d) * ld(v, 0)
+        for m in range(1, d):
+            acc = acc + ld(T, l * d + m) * ld(v, m)
+        st(out, l, acc)
+
+
+@njit(inline='always', **_OPTS)
 def _contract(TT, v, out, d):
     """out[m, n] = Σ_l TT[l, m, n] v_l  (∂(ϑ_qᵀ v)/∂q)."""
     dd = d * d
@@ -434,11 +467,14 @@ def _eval(ev, k, x, need, w, S, slot, d):
 def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
     """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
     eq:vprk_3); with ``jac`` also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i G_i (sY, sG), double +
-    correction weights."""
+    correction weights.  In plain doubles also ϑ_q(Q_i) e_i (tE), e_i what rounding Q_i to double
+    dropped, q̃'s own (``S.eQ``) included (:func:`exact_points`)."""
     dd = d * d
     ddd = dd * d
     Q, th, T, TT, dH, HH = at(w, S.Q), at(w, S.th), at(w, S.T), at(w, S.TT), at(w, S.dH), at(w, S.HH)
     G, K, sY, sG = at(w, S.G), at(w, S.K), at(w, S.sY), at(w, S.sG)
+    exact = exact_points(ld(q0, 0))
+    e0, e, tE = at(w, S.eQ), at(w, S.tl), at(w, S.tE)
     for i in range(s):
         for m in range(d):
             acc = c.a[i * s] * ld(z, m)
@@ -447,9 +483,15 @@ def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
             cor = c.a_lo[i * s] * ld(z, m)
             for j in range(1, s):
                 cor = cor + c.a_lo[i * s + j] * ld(z, j * d + m)
-            st(Q, i * d + m, ld(q0, m) + (acc + cor))
+            x = acc + cor
+            Qm = ld(q0, m) + x
+            st(Q, i * d + m, Qm)
+            if exact:
+                st(e, m, rounding(ld(q0, m), x, Qm) + ld(e0, m))
         ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),
            raw(at(dH, i * d)), raw(at(HH, i * dd)))
+        if exact:
+            _apply(at(T, i * dd), e, at(tE, i * d), d)
         Gi = at(G, i * d)
         _tapply(at(T, i * dd), at(z, i * d), Gi, d)
         for m in range(d):
@@ -481,6 +523,12 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
     projection q̃ = q̄ + Λ, p̃ = p̄ + ϑ_q(x_pre)ᵀΛ (eq:symmetric_projection_pre,
     eq:symplectic_midpoint_projection_pre) and the constraint row R_Λ = p_{n+1} − ϑ(q_{n+1}) with
     q_{n+1} = q̃ + Σ b_i Y_i + σΛ, p_{n+1} = p̃ + Σ b_i G_i + σ ϑ_q(x_post)ᵀΛ (the matching _post).
+
+    In plain doubles ϑ at a point is taken as ϑ(x) + ϑ_q(x) e, e what rounding x = q̄ + … to double
+    dropped (:func:`exact_points`): ϑ(Q_i) − p̃ is then the increment's own, to its own relative
+    precision, not to an ulp of q.  Without it the part of Y below an ulp of q is left where the
+    guess put it, and the compensated sum of q_{n+1} accumulates it (a constant of the motion kept
+    exactly in exact arithmetic then walks off by whole ulps, one sign: docs/brouwer.md).
     """
     dd = d * d
     sd = s * d
@@ -489,10 +537,20 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
     iM = sd + d if coupled else sd
     qbar, pbar, q0, pb = at(w, S.qbar), at(w, S.pbar), at(w, S.q0), at(w, S.pb)
     sY, sG, q1, p1, mid, tl = at(w, S.sY), at(w, S.sG), at(w, S.q1), at(w, S.p1), at(w, S.mid), at(w, S.tl)
-    th, G, pth, pT = at(w, S.th), at(w, S.G), at(w, S.pth), at(w, S.pT)
+    th, G, pth, pT, tE, pwe = at(w, S.th), at(w, S.G), at(w, S.pth), at(w, S.pT), at(w, S.tE), at(w, S.pwe)
     Lz = at(z, iL)
+    exact = exact_points(ld(qbar, 0))
+    qbe, e0 = at(w, S.qbe), at(w, S.eQ)
     for m in range(d):
-        st(q0, m, ld(qbar, m) + ld(Lz, m) if coupled else ld(qbar, m))
+        if coupled:
+            q0m = ld(qbar, m) + ld(Lz, m)
+            st(q0, m, q0m)
+            if exact:
+                st(e0, m, ld(qbe, m) + rounding(ld(qbar, m), ld(Lz, m), q0m))
+        else:
+            st(q0, m, ld(qbar, m))
+            if exact:
+                st(e0, m, ld(qbe, m))
     _stages(z, jac, ev, k, h, c, q0, s, d, w, S)
     px = START
     if coupled:
@@ -503,10 +561,15 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             px = MIDPOINT
         _tapply(at(pT, px * dd), Lz, pb, d)
         for m in range(d):
-            st(pb, m, ld(pbar, m) + ld(pb, m))
+            pbm = ld(pbar, m) + ld(pb, m)
+            if exact:
+                st(pwe, m, ld(w, S.pbe + m) + rounding(ld(pbar, m), ld(pb, m), pbm))
+            st(pb, m, pbm)
     else:
         for m in range(d):
             st(pb, m, ld(pbar, m))
+            if exact:
+                st(pwe, m, ld(w, S.pbe + m))
     for i in range(s):
         for m in range(d):
             acc = c.abar[i * s] * ld(G, m)
@@ -515,19 +578,35 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             cor = c.abar_lo[i * s] * ld(G, m)
             for j in range(1, s):
                 cor = cor + c.abar_lo[i * s + j] * ld(G, j * d + m)
-            rr = ld(th, i * d + m) - ld(pb, m) - (acc + cor)
+            rr = ld(th, i * d + m) - ld(pb, m)
+            if exact:
+                rr = (rr + ld(tE, i * d + m)) - ld(pwe, m)
+            rr = rr - (acc + cor)
             if plan.lobatto:
                 rr = rr + ld(z, iM + m) * lobatto_ratio(c, i, rr)
             st(r, i * d + m, rr)
     if coupled:
+        e1 = at(w, S.qhe)
         for m in range(d):
-            st(q1, m, ld(q0, m) + ld(sY, m) + plan.sigma * ld(Lz, m))
+            a = ld(q0, m) + ld(sY, m)
+            q1m = a + plan.sigma * ld(Lz, m)
+            st(q1, m, q1m)
+            if exact:
+                st(e1, m, ld(e0, m) + rounding(ld(q0, m), ld(sY, m), a) + rounding(a, plan.sigma * ld(Lz, m), q1m))
         _eval(ev, k, q1, jac, w, S, END, d)
         pp = END if plan.post_at == END else px
         _tapply(at(pT, pp * dd), Lz, tl, d)
+        if exact:
+            _apply(at(pT, END * dd), e1, at(w, S.eQ), d)        # ϑ_q(q_{n+1}) e_{n+1} (q̃'s e0 is used)
         for m in range(d):
-            st(p1, m, ld(pb, m) + ld(sG, m) + plan.sigma * ld(tl, m))
-            st(r, iL + m, ld(p1, m) - ld(pth, END * d + m))
+            a = ld(pb, m) + ld(sG, m)
+            p1m = a + plan.sigma * ld(tl, m)
+            st(p1, m, p1m)
+            rl = p1m - ld(pth, END * d + m)
+            if exact:
+                pe = ld(pwe, m) + rounding(ld(pb, m), ld(sG, m), a) + rounding(a, plan.sigma * ld(tl, m), p1m)
+                rl = (rl + pe) - ld(w, S.eQ + m)
+            st(r, iL + m, rl)
     if plan.lobatto:
         for m in range(d):
             z0 = ld(z, m)
@@ -644,17 +723,32 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
     step's q̄ + ΣbY, p̄ + ΣbG) and the iterate Λ = ``z``, write p_{n+1} into ``S.p1``, the d
     residuals into ``r`` and, when ``jac``, their Jacobian ∂r/∂Λ row-major into ``J``.  The kernel
     then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1}; ``ev(x, k, jac, …)`` at a
-    point slot (:func:`_eval`) gives ϑ and its derivatives."""
+    point slot (:func:`_eval`) gives ϑ and its derivatives.  In plain doubles (``exact_points``)
+    ``S.qhe`` and ``S.phe`` hold what rounding q̂ and p̂ to double dropped: a post term resolves Λ
+    below an ulp of q when its residual sees its sums exactly, as this one does (ϑ at q̂ + σΛ as
+    ϑ + ϑ_q e, e that error plus its own sum's, :func:`rounding`; p̂ + σϑ_qᵀΛ with its errors
+    added); one that does not still converges, to an ulp of q."""
     dd = d * d
     qh, ph, q1, p1, tl = at(w, S.qh), at(w, S.ph), at(w, S.q1), at(w, S.p1), at(w, S.tl)
     th1, T1, TT1 = at(w, S.pth + END * d), at(w, S.pT + END * dd), at(w, S.pTT + END * dd * d)
+    exact = exact_points(ld(qh, 0))
+    e1, te = at(w, S.eQ), at(w, S.tE)
     for m in range(d):
-        st(q1, m, ld(qh, m) + sig * ld(z, m))
+        q1m = ld(qh, m) + sig * ld(z, m)
+        st(q1, m, q1m)
+        if exact:
+            st(e1, m, ld(w, S.qhe + m) + rounding(ld(qh, m), sig * ld(z, m), q1m))
     _eval(ev, k, q1, jac, w, S, END, d)
     _tapply(T1, z, tl, d)
+    if exact:
+        _apply(T1, e1, te, d)
     for m in range(d):
-        st(p1, m, ld(ph, m) + sig * ld(tl, m))
-        st(r, m, ld(p1, m) - ld(th1, m))
+        p1m = ld(ph, m) + sig * ld(tl, m)
+        st(p1, m, p1m)
+        rm = p1m - ld(th1, m)
+        if exact:
+            rm = (rm + (ld(w, S.phe + m) + rounding(ld(ph, m), sig * ld(tl, m), p1m))) - ld(te, m)
+        st(r, m, rm)
     if jac:
         S1 = at(w, S.S + dd)
         _contract(TT1, z, S1, d)
@@ -722,8 +816,9 @@ def _update(z, r, done, scale, nz, f, F):
 
 @njit(inline='always', **_OPTS)
 def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
-    """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol,
-    or ≤ stall once the update stops halving: within ``fine`` (64 ulps), or wherever the
+    """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol, or
+    ≤ fine² (an update of 10⁻²⁸ of its coordinate, far below what even the compensation term of q
+    holds: there is nothing left to halve), or ≤ stall once the update stops halving: within ``fine`` (64 ulps), or wherever the
     iteration before was a Newton step with a Jacobian at its own iterate, after which the update
     falls quadratically unless round-off stops it; factors carried from an earlier step or iterate
     can stop halving far above the floor, or even grow, when the guess was poor: stopping there
@@ -745,7 +840,7 @@ def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
     failed = mor(mor(ld(f, F.nan) != 0.0, ld(f, F.finite) == 0.0), mnot(np.isfinite(sz)))
     theta = sel(np.isfinite(prev), sz / prev, np.inf)
     slow = mand(np.isfinite(theta), theta > 0.5)
-    floored = mand(mand(sz <= stall, slow), mor(ld(f, F.exact) != 0.0, sz <= fine))
+    floored = mor(mand(mand(sz <= stall, slow), mor(ld(f, F.exact) != 0.0, sz <= fine)), sz <= fine * fine)
     converged = mand(mand(mnot(failed), mor(sz <= tol, floored)), ld(f, F.its) >= least)
     ends = mand(on, mor(failed, converged))
     goes = mand(on, mnot(ends))
@@ -870,19 +965,36 @@ def _first_guess(ev, P, q, Y, where, d, s, g):
 def _prepare(ev, k, plan, d, w, S):
     """q̄, p̄ where Ψ_h starts: projected methods start on the constraint p_n = ϑ(q_n); the symplectic
     projection first adds the last step's Λ_n (eq:symplectic_projection_pre); ϑ_q(q_n) stays in
-    the START slot for the symmetric projection's perturbation."""
+    the START slot for the symmetric projection's perturbation.  In plain doubles what rounding q̄ and
+    p̄ to double dropped goes to ``S.qbe`` and ``S.pbe`` (:func:`exact_points`)."""
     q, p, lam = at(w, S.q), at(w, S.p), at(w, S.lam)
-    qbar, pbar, tl = at(w, S.qbar), at(w, S.pbar), at(w, S.tl)
+    qbar, pbar, tl, qbe = at(w, S.qbar), at(w, S.pbar), at(w, S.tl), at(w, S.qbe)
     pth, pT = at(w, S.pth), at(w, S.pT)
+    exact = exact_points(ld(q, 0))
     if plan.post:
         _eval(ev, k, q, False, w, S, START, d)
     for m in range(d):
-        st(qbar, m, ld(q, m) + ld(lam, m) if plan.pre == PRE_PREVIOUS else ld(q, m))
+        if plan.pre == PRE_PREVIOUS:
+            qb = ld(q, m) + ld(lam, m)
+            st(qbar, m, qb)
+            if exact:
+                st(qbe, m, rounding(ld(q, m), ld(lam, m), qb))
+        else:
+            st(qbar, m, ld(q, m))
+            if exact:
+                st(qbe, m, 0.0 * ld(q, m))
         st(pbar, m, ld(pth, m) if plan.post else ld(p, m))
+    pbe = at(w, S.pbe)
+    if exact:
+        for m in range(d):
+            st(pbe, m, 0.0 * ld(q, m))
     if plan.pre == PRE_PREVIOUS:
         _tapply(pT, lam, tl, d)
         for m in range(d):
-            st(pbar, m, ld(pbar, m) + ld(tl, m))
+            pb = ld(pbar, m) + ld(tl, m)
+            if exact:
+                st(pbe, m, rounding(ld(pbar, m), ld(tl, m), pb))
+            st(pbar, m, pb)
 
 
 @njit(inline='always', **_OPTS)
@@ -931,10 +1043,17 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
     elif plan.post:                             # Ψ_h, then the projection
         qh, ph, sYs = at(w, S.qh), at(w, S.ph), at(w, S.sYs)
         pz, pzev, pr = at(w, S.pz), at(w, S.pzev), at(w, S.pr)
+        qhe, qbe, phe, pbe = at(w, S.qhe), at(w, S.qbe), at(w, S.phe), at(w, S.pbe)
+        exact = exact_points(ld(qbar, 0))
         for m in range(d):
             st(sYs, m, ld(sY, m))
-            st(qh, m, ld(qbar, m) + ld(sY, m))
-            st(ph, m, ld(pbar, m) + ld(sG, m))
+            qhm = ld(qbar, m) + ld(sY, m)
+            st(qh, m, qhm)
+            phm = ld(pbar, m) + ld(sG, m)
+            st(ph, m, phm)
+            if exact:
+                st(qhe, m, ld(qbe, m) + rounding(ld(qbar, m), ld(sY, m), qhm))
+                st(phe, m, ld(pbe, m) + rounding(ld(pbar, m), ld(sG, m), phm))
             st(pz, m, ld(lam0, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
         _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, P,

@@ -32,17 +32,19 @@ SCHEDULE = integrators.Tolerances(trust_max_unknowns=64, jacobian_every=2)   # .
 
 
 # (pair, points, iterations bound, Newton work bound against the old rule's): one point per lane,
-# so that the Jacobians are the points'.  Since issue 70 every step iterates to its round-off floor
-# (Tolerances.tol = 0), about one iteration a step more than the fixed 4 ulps before it (docs/brouwer.md).
-# Measured 2026-11-28 with the default: GLRK2-symmetric 3.65 iterations, 0.13 Jacobians, work 4.09
-# against 7.82 (0.52); GLRK2-standard 6.50, 9.14 against 11.31 (0.81); SRK3-symmetric 3.83, 4.45
-# against 8.45 (0.53); GLRK4-symmetric 4.02, 4.32 against 6.57 (0.66); GLRK6-symmetric 4.38, 4.64
-# against 7.05 (0.66); GLRK1-none 5.28, 6.70 against 7.18 (0.93); one orbit of GLRK4 / GLRK6: 4.04 /
-# 4.36.  (With the fixed 4 ulps: 2.48, 4.46, 2.53, 2.73, 3.60, 3.65; one orbit 2.88 / 3.84.)
-WORK = [("GLRK2", "symmetric", 32, 3.8, 0.55), ("GLRK2", "standard", 32, 6.8, 0.85),
-        ("SRK3", "symmetric", 32, 4.0, 0.56), ("GLRK4", "symmetric", 32, 4.2, 0.7),
-        ("GLRK6", "symmetric", 32, 4.6, 0.7), ("GLRK4", "symmetric", 1, 4.2, 0.75),
-        ("GLRK6", "symmetric", 1, 4.6, 0.75), ("GLRK1", "none", 32, 5.5, 0.96)]
+# so that the Jacobians are the points'.  Every step iterates to its round-off floor (Tolerances.tol
+# = 0), and its equations see their points exactly (kernel.exact_points), so that floor is the
+# increments' own, below an ulp of q (docs/brouwer.md, docs/engine.md).
+# Measured 2026-11-29 with the default: GLRK2-symmetric 4.06 iterations, 0.13 Jacobians, work 4.50
+# against 7.82 (0.58); GLRK2-standard 8.37, 11.00 against 11.30 (0.97); SRK3-symmetric 4.23, 4.86
+# against 8.46 (0.57); GLRK4-symmetric 4.31, 4.62 against 6.51 (0.71); GLRK6-symmetric 4.68, 4.94
+# against 6.31 (0.78); GLRK1-none 5.75, 7.18 against 7.18 (1.00); one orbit of GLRK4 / GLRK6: 4.20 /
+# 4.56 (work 0.65 / 0.72).  (Before the exact points: 3.65, 6.50, 3.83, 4.02, 4.38, 5.28; one orbit
+# 4.04 / 4.36.  With the fixed 4 ulps before: 2.48, 4.46, 2.53, 2.73, 3.60, 3.65; one orbit 2.88 / 3.84.)
+WORK = [("GLRK2", "symmetric", 32, 4.2, 0.62), ("GLRK2", "standard", 32, 8.6, 1.0),
+        ("SRK3", "symmetric", 32, 4.4, 0.62), ("GLRK4", "symmetric", 32, 4.45, 0.75),
+        ("GLRK6", "symmetric", 32, 4.85, 0.82), ("GLRK4", "symmetric", 1, 4.35, 0.7),
+        ("GLRK6", "symmetric", 1, 4.7, 0.76), ("GLRK1", "none", 32, 5.95, 1.02)]
 
 
 @pytest.mark.parametrize("tab,proj,n,its_bound,work_bound", WORK)
@@ -50,8 +52,9 @@ def test_newton_work_per_step_on_the_benchmark_protocol(tab, proj, n, its_bound,
     """guiding_centre_symmetric, h = 10, points near the default loop, 50 steps from the start (the
     first steps' shorter history included).  Once the table is full the guess is the fitted
     recurrence's (a rotation it follows to round-off), too good to need a Jacobian: the carried
-    factors converge to the round-off floor.  The Newton work is 0.52-0.93 of the rule before
-    issue 55 (6.51, 8.50, 6.46, 5.60, 4.85, 6.83 iterations; one orbit 5.52, 4.92)."""
+    factors converge to the round-off floor.  The Newton work is 0.57-1.00 of the rule before
+    issue 55 (6.51, 8.50, 6.46, 5.58, 4.80, 6.83 iterations; one orbit 5.42, 4.80), which stops at
+    a fixed 4 ulps instead of the floor."""
     q0 = protocol_points(n) if n > 1 else protocol_points(3)[:1]
     its, jacs, work = newton_per_step(tab, proj, q0, lanes=1)
     old = newton_per_step(tab, proj, q0, OLD, lanes=1)

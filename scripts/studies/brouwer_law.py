@@ -240,7 +240,7 @@ def cases(args):
                 if tab in CANONICAL_H[case]:
                     yield system, q0, tab, "none", CANONICAL_H[case][tab], args.steps
         elif case == "degenerate":
-            for name in DEGENERATE:
+            for name in args.degenerate_systems:
                 system, q0 = degenerate(name, args.degenerate_starts)
                 h = float(system.defaults["h"])
                 for tab in DEGENERATE_TABLEAUS:
@@ -334,6 +334,8 @@ def main(argv=None):
     ap.add_argument("--before-steps", type=int, default=200_000)
     ap.add_argument("--degenerate-steps", type=int, default=100_000)
     ap.add_argument("--degenerate-starts", type=int, default=32)
+    ap.add_argument("--degenerate-systems", type=lambda s: s.split(","), default=list(DEGENERATE),
+                    help="which of the degenerate systems (comma-separated; default all three)")
     ap.add_argument("--probe", type=int, default=20_000, help="steps of the double-double run that decides "
                     "whether the truncation part is negligible")
     ap.add_argument("--every", type=int, default=1000, help="output cadence in steps")
