@@ -26,6 +26,8 @@ older rules over the first ``--before-steps`` (2·10⁵) steps, the issue's meas
     python scripts/studies/brouwer_law.py --json docs/figures/brouwer_law.json        # about 1.5 h
     python scripts/studies/brouwer_law.py --cases pendulum --tableaus GLRK4 --steps 200000
     python scripts/studies/brouwer_law.py --markdown docs/figures/brouwer_law.json   # the table
+    python scripts/studies/brouwer_law.py --markdown OLD.json NEW.json --json ALL.json   # NEW's rows replace
+                                                      # OLD's (their exponents shown beside), into ALL
     python scripts/studies/brouwer_law.py --speed          # what it costs: point-steps/s, one thread
     python scripts/studies/brouwer_law.py --cases kepler --tableaus GLRK6 --starts 32 \
         --rule 'fresh={"trust_max_unknowns": 64, "trust_floor": 0, "refresh_floor": 0}'   # another rule beside
@@ -56,6 +58,9 @@ FIT_FROM = 1000           # the exponent is fitted from this step on (the issue'
 BOOTSTRAP = 200
 SAMPLES = 40              # log-spaced samples of the RMS series the fit uses
 EXPONENT_BOUND = 0.55     # issue 70: every pair at most this
+# the engine a rows file was measured with (written into the file); a file without it is older
+ENGINE = "2026-11-29: the equations see their points exactly (kernel.exact_points)"
+OLDER = "2026-11-28: before the exact points"
 NEGLIGIBLE = 1e-19        # a truncation part below this: the reference is H(q₀) (no double-double run)
 COUPLING_MAX = 0.01       # the round-off part δE moves the phase by ~δE·T (frequencies ~ 1 here), which
                           # moves a truncation error of size e by ~e·δE·T: e·T at most this, so that
@@ -263,12 +268,33 @@ def laws(rule):
     return growth_law(at, rms, roundoff=0.0).law, VERDICTS[growth_law(at, rms).law]
 
 
+def merged(docs):
+    """The rows of several rows files, a later file's row replacing an earlier one of the same pair;
+    each row keeps its file's ``engine`` and, where it replaced a row of an older engine, that row's
+    exponent (now) as ``before``."""
+    out = {}
+    for doc in docs:
+        engine = doc.get("engine", OLDER)
+        for row in doc["rows"]:
+            key = (row["system"], row["tableau"], row["projection"])
+            row = dict(row, engine=row.get("engine", engine))     # a merged file's rows keep theirs
+            old = out.get(key)
+            if old is not None and old["engine"] != engine and not old.get("left_out"):
+                row["before"] = dict(exponent=old["rules"]["now"]["exponent"],
+                                     spread=old["rules"]["now"]["exponent_spread"],
+                                     iterations=old["rules"]["now"]["iterations"], engine=old["engine"])
+            out[key] = row
+    return list(out.values())
+
+
 def markdown(rows):
-    """The table of docs/brouwer.md: one line per pair, the three rules side by side."""
+    """The table of docs/brouwer.md: one line per pair, the three rules side by side; a pair measured
+    with an older engine than ENGINE is marked †, and a pair re-measured shows the older engine's
+    exponent and iterations (now) beside."""
     lines = ["| system | pair | h | steps | reference (truncation) | it./step: now · fixed · extrapolate | "
-             "exponent now | fixed | extrapolate | RMS at 2·10⁵: now · fixed · extrapolate | mean / RMS at end (now) | "
-             "law (no floor) · audit |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "exponent now | fixed | extrapolate | now before the exact points (it./step) | "
+             "RMS at 2·10⁵: now · fixed · extrapolate | mean / RMS at end (now) | law (no floor) · audit |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     left = []
     for row in rows:
         if row.get("left_out"):
@@ -279,13 +305,16 @@ def markdown(rows):
         b = fixed["steps"]
         bold = "**" if now["exponent"] <= EXPONENT_BOUND else ""
         law, verdict = laws(now)
+        mark = "" if row.get("engine", ENGINE) == ENGINE else " †"
+        bef = row.get("before")
+        before = f"{bef['exponent']:.2f} ± {bef['spread']:.2f} ({bef['iterations']:.2f})" if bef else "—"
         lines.append(
-            f"| {row['system']} | {row['tableau']}-{row['projection']} | {row['h']:g} | {now['steps']:,} | "
+            f"| {row['system']} | {row['tableau']}-{row['projection']}{mark} | {row['h']:g} | {now['steps']:,} | "
             f"{ref} ({row['truncation']:.0e}) | {now['iterations']:.2f} · {fixed['iterations']:.2f} · "
             f"{extra['iterations']:.2f} | {bold}{now['exponent']:.2f} ± {now['exponent_spread']:.2f}{bold} | "
             f"{fixed['exponent']:.2f} ± {fixed['exponent_spread']:.2f} | {extra['exponent']:.2f} ± "
-            f"{extra['exponent_spread']:.2f} | {rms_at(now, b):.1e} · {fixed['rms_end']:.1e} · {extra['rms_end']:.1e} | "
-            f"{now['mean_end'] / now['rms_end']:+.2f} | {law} · {verdict} |")
+            f"{extra['exponent_spread']:.2f} | {before} | {rms_at(now, b):.1e} · {fixed['rms_end']:.1e} · "
+            f"{extra['rms_end']:.1e} | {now['mean_end'] / now['rms_end']:+.2f} | {law} · {verdict} |")
     out = "\n".join(lines)
     if left:
         out += "\n\nLeft out:\n" + "\n".join(f"- {x}" for x in left)
@@ -356,12 +385,18 @@ def main(argv=None):
         speed()
         return 0
     if args.markdown:
-        print(markdown([r for f in args.markdown for r in json.loads(Path(f).read_text())["rows"]]))
+        docs = [json.loads(Path(f).read_text()) for f in args.markdown]
+        rows = merged(docs)
+        print(markdown(rows))
+        if args.json:                  # the merged rows, each with its engine, as one file
+            Path(args.json).write_text(json.dumps(dict(
+                rows=rows, engine=ENGINE, merged_from=[dict(command=d.get("command", d.get("commands")),
+                note=d.get("note"), engine=d.get("engine", OLDER)) for d in docs]), indent=1) + "\n")
         return 0
     cache = cache_dir(args.cache)
     doc = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else dict(rows=[])
     doc.update(command="python scripts/studies/brouwer_law.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-               machine=os.uname().machine, numpy=np.__version__)
+               machine=os.uname().machine, numpy=np.__version__, engine=ENGINE)
     for system, q0, tab, proj, h, steps in cases(args):
         every = min(args.every, steps // 100)
         t = time.perf_counter()
