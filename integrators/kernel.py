@@ -159,6 +159,39 @@ def rounding(a, b, s):
     return (a - (s - bb)) + (b - bb)
 
 
+@njit(**_OPTS)
+def product_rounding(a, b, p):
+    """a·b − p exactly, for p = fl(a·b) (Dekker's TwoProduct with Veltkamp's splitting: no fused
+    multiply-add, so the same bits on every machine; exact while |a|, |b| < 2⁹⁹⁶)."""
+    ca = 134217729.0 * a                    # 2²⁷ + 1
+    ah = ca - (ca - a)
+    al = a - ah
+    cb = 134217729.0 * b
+    bh = cb - (cb - b)
+    bl = b - bh
+    return ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+@njit(**_OPTS)
+def _weighted_sum(wt, wt_lo, o, v, s, d, m):
+    """Σ_i (wt_{o+i} + wt_lo_{o+i}) v_{i,m} as (the sum rounded to double, what that rounding
+    dropped): each product's and each addition's rounding error is kept (:func:`product_rounding`,
+    :func:`rounding`) and summed apart, so the pair is the sum to O(ε²) of its size (Ogita, Rump
+    and Oishi's Dot2).  Compiled apart, not inlined into numba's IR (LLVM still inlines it): the
+    same bits and speed, and 10 s less compilation per kernel (docs/benchmarks-history.md)."""
+    x = ld(v, m)
+    acc = wt[o] * x
+    err = product_rounding(wt[o], x, acc) + wt_lo[o] * x
+    for i in range(1, s):
+        x = ld(v, i * d + m)
+        pr = wt[o + i] * x
+        t = acc + pr
+        err = err + ((rounding(acc, pr, t) + product_rounding(wt[o + i], x, pr)) + wt_lo[o + i] * x)
+        acc = t
+    out = acc + err
+    return out, err - (out - acc)
+
+
 # -- the scratch: named offsets into one buffer per group of W points ---------------------------
 
 Scratch = namedtuple("Scratch", [
@@ -170,7 +203,7 @@ Scratch = namedtuple("Scratch", [
     "pth", "pT", "pTT", "pdH", "pHH",
     # d-vectors
     "qbar", "pbar", "q0", "pb", "sY", "sG", "q1", "p1", "mid", "tl", "qh", "ph", "vf", "inc", "qn", "qcn", "pn",
-    "pcn", "ln", "sYs", "eQ", "qbe", "qhe", "pbe", "pwe", "phe", "qr",
+    "pcn", "ln", "sYs", "eQ", "qbe", "qhe", "pbe", "pwe", "phe", "sYe", "sGe", "ince", "qr",
     # Newton: unknowns, evaluated iterate, residual, fresh Jacobian, projection's Newton, guesses
     "z", "zev", "r", "Jt", "S", "PL", "pz", "pzev", "pr", "pJ", "guess",
     # the predictor: this step's base guess (stages, Λ, μ) and the last steps' defects from theirs
@@ -467,8 +500,10 @@ def _eval(ev, k, x, need, w, S, slot, d):
 def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
     """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
     eq:vprk_3); with ``jac`` also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i G_i (sY, sG), double +
-    correction weights.  In plain doubles also ϑ_q(Q_i) e_i (tE), e_i what rounding Q_i to double
-    dropped, q̃'s own (``S.eQ``) included (:func:`exact_points`)."""
+    correction weights.  In plain doubles every sum is formed to O(ε²) (:func:`_weighted_sum`):
+    ϑ_q(Q_i) e_i goes to tE, e_i what forming Q_i in doubles dropped (Σ_j a_ij Y_j's rounding,
+    q̃ + that sum's, q̃'s own ``S.eQ``: :func:`exact_points`), and what rounding the two sums to
+    double dropped to ``S.sYe``, ``S.sGe``."""
     dd = d * d
     ddd = dd * d
     Q, th, T, TT, dH, HH = at(w, S.Q), at(w, S.th), at(w, S.T), at(w, S.TT), at(w, S.dH), at(w, S.HH)
@@ -477,6 +512,12 @@ def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
     e0, e, tE = at(w, S.eQ), at(w, S.tl), at(w, S.tE)
     for i in range(s):
         for m in range(d):
+            if exact:                           # Σ_j a_ij Y_j to O(ε²), its error into e_i
+                x, xe = _weighted_sum(c.a, c.a_lo, i * s, z, s, d, m)
+                Qm = ld(q0, m) + x
+                st(Q, i * d + m, Qm)
+                st(e, m, (rounding(ld(q0, m), x, Qm) + xe) + ld(e0, m))
+                continue
             acc = c.a[i * s] * ld(z, m)
             for j in range(1, s):
                 acc = acc + c.a[i * s + j] * ld(z, j * d + m)
@@ -486,8 +527,6 @@ def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
             x = acc + cor
             Qm = ld(q0, m) + x
             st(Q, i * d + m, Qm)
-            if exact:
-                st(e, m, rounding(ld(q0, m), x, Qm) + ld(e0, m))
         ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),
            raw(at(dH, i * d)), raw(at(HH, i * dd)))
         if exact:
@@ -502,6 +541,14 @@ def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
             for mn in range(dd):
                 st(Ki, mn, ld(Ki, mn) - h * ld(HH, i * dd + mn))
     for m in range(d):
+        if exact:                               # the increments to O(ε²): what rounding them drops
+            y, ye = _weighted_sum(c.b, c.b_lo, 0, z, s, d, m)       # goes to sYe, sGe
+            g, ge = _weighted_sum(c.b, c.b_lo, 0, G, s, d, m)
+            st(sY, m, y)
+            st(sG, m, g)
+            st(w, S.sYe + m, ye)
+            st(w, S.sGe + m, ge)
+            continue
         acc = c.b[0] * ld(z, m)
         cor = c.b_lo[0] * ld(z, m)
         accg = c.b[0] * ld(G, m)
@@ -592,7 +639,8 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             q1m = a + plan.sigma * ld(Lz, m)
             st(q1, m, q1m)
             if exact:
-                st(e1, m, ld(e0, m) + rounding(ld(q0, m), ld(sY, m), a) + rounding(a, plan.sigma * ld(Lz, m), q1m))
+                st(e1, m, (ld(e0, m) + ld(w, S.sYe + m)) + rounding(ld(q0, m), ld(sY, m), a)
+                   + rounding(a, plan.sigma * ld(Lz, m), q1m))
         _eval(ev, k, q1, jac, w, S, END, d)
         pp = END if plan.post_at == END else px
         _tapply(at(pT, pp * dd), Lz, tl, d)
@@ -604,7 +652,8 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             st(p1, m, p1m)
             rl = p1m - ld(pth, END * d + m)
             if exact:
-                pe = ld(pwe, m) + rounding(ld(pb, m), ld(sG, m), a) + rounding(a, plan.sigma * ld(tl, m), p1m)
+                pe = ((ld(pwe, m) + ld(w, S.sGe + m)) + rounding(ld(pb, m), ld(sG, m), a)
+                      + rounding(a, plan.sigma * ld(tl, m), p1m))
                 rl = (rl + pe) - ld(w, S.eQ + m)
             st(r, iL + m, rl)
     if plan.lobatto:
@@ -1037,7 +1086,12 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
     if coupled:                                 # Ψ_h and Λ solved together
         for m in range(d):
             Lm = ld(zev, iL + m)
-            st(inc, m, (Lm + ld(sY, m)) + plan.sigma * Lm)
+            a = Lm + ld(sY, m)
+            b = plan.sigma * Lm
+            im = a + b
+            st(inc, m, im)
+            if exact_points(Lm):
+                st(w, S.ince + m, (ld(w, S.sYe + m) + rounding(Lm, ld(sY, m), a)) + rounding(a, b, im))
             st(pn, m, ld(p1, m))
             st(ln, m, Lm)
     elif plan.post:                             # Ψ_h, then the projection
@@ -1052,8 +1106,8 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
             phm = ld(pbar, m) + ld(sG, m)
             st(ph, m, phm)
             if exact:
-                st(qhe, m, ld(qbe, m) + rounding(ld(qbar, m), ld(sY, m), qhm))
-                st(phe, m, ld(pbe, m) + rounding(ld(pbar, m), ld(sG, m), phm))
+                st(qhe, m, (ld(qbe, m) + ld(w, S.sYe + m)) + rounding(ld(qbar, m), ld(sY, m), qhm))
+                st(phe, m, (ld(pbe, m) + ld(w, S.sGe + m)) + rounding(ld(pbar, m), ld(sG, m), phm))
             st(pz, m, ld(lam0, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
         _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, P,
@@ -1062,13 +1116,20 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
         its = its + ld(f, F.its)
         for m in range(d):
             shift = ld(lam, m) + ld(sYs, m) if plan.pre == PRE_PREVIOUS else ld(sYs, m)
-            st(inc, m, shift + plan.sigma * ld(pzev, m))
+            b = plan.sigma * ld(pzev, m)
+            im = shift + b
+            st(inc, m, im)
+            if exact:
+                e = rounding(ld(lam, m), ld(sYs, m), shift) if plan.pre == PRE_PREVIOUS else 0.0 * shift
+                st(w, S.ince + m, (ld(w, S.sYe + m) + e) + rounding(shift, b, im))
             st(pn, m, ld(p1, m))
             st(ln, m, ld(pzev, m))
     else:
         for m in range(d):
             st(inc, m, ld(sY, m))
             st(ln, m, 0.0)
+            if exact_points(ld(sY, m)):
+                st(w, S.ince + m, ld(w, S.sYe + m))
     active = ld(f, F.active) != 0.0
     st(f, F.itn, ld(f, F.itn) + sel(active, its, 0.0))
     _sum_increments(plan, d, w, S)
@@ -1081,18 +1142,23 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
 @njit(inline='always', **_OPTS)
 def _sum_increments(plan, d, w, S):
     """q_{n+1} = q_n + inc (and, unprojected, p_{n+1} = p_n + Σ b_i G_i) by compensated summation into
-    qn, qcn (pn, pcn); a projected step's pn is already p_{n+1} and keeps its compensation term."""
+    qn, qcn (pn, pcn); a projected step's pn is already p_{n+1} and keeps its compensation term.  In
+    plain doubles what rounding the increment to double dropped (``S.ince``, ``S.sGe``) joins the
+    compensation term, so q_{n+1} is the step's own to O(ε²) of the increment (rounded, the
+    increment's errors of an ulp of itself added up with one sign on the guiding centre's GLRK4
+    pairs: docs/brouwer.md)."""
     q, p, qc, pc, sG = at(w, S.q), at(w, S.p), at(w, S.qc), at(w, S.pc), at(w, S.sG)
     inc, pn, qn, qcn, pcn = at(w, S.inc), at(w, S.pn), at(w, S.qn), at(w, S.qcn), at(w, S.pcn)
+    exact = exact_points(ld(q, 0))
     for m in range(d):
-        y = ld(inc, m) + ld(qc, m)
+        y = ld(inc, m) + (ld(qc, m) + ld(w, S.ince + m)) if exact else ld(inc, m) + ld(qc, m)
         t = ld(q, m) + y
         st(qcn, m, y - (t - ld(q, m)))
         st(qn, m, t)
         if plan.post:
             st(pcn, m, ld(pc, m))
         else:
-            y = ld(sG, m) + ld(pc, m)
+            y = ld(sG, m) + (ld(pc, m) + ld(w, S.sGe + m)) if exact else ld(sG, m) + ld(pc, m)
             t = ld(p, m) + y
             st(pcn, m, y - (t - ld(p, m)))
             st(pn, m, t)

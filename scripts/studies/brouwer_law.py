@@ -59,8 +59,10 @@ BOOTSTRAP = 200
 SAMPLES = 40              # log-spaced samples of the RMS series the fit uses
 EXPONENT_BOUND = 0.55     # issue 70: every pair at most this
 # the engine a rows file was measured with (written into the file); a file without it is older
-ENGINE = "2026-11-29: the equations see their points exactly (kernel.exact_points)"
+ENGINE = "2026-11-29: the increments summed exactly (kernel._weighted_sum)"
+EXACT_POINTS = "2026-11-29: the equations see their points exactly (kernel.exact_points)"
 OLDER = "2026-11-28: before the exact points"
+MARKS = {ENGINE: "", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
 NEGLIGIBLE = 1e-19        # a truncation part below this: the reference is H(q₀) (no double-double run)
 COUPLING_MAX = 0.01       # the round-off part δE moves the phase by ~δE·T (frequencies ~ 1 here), which
                           # moves a truncation error of size e by ~e·δE·T: e·T at most this, so that
@@ -289,10 +291,10 @@ def merged(docs):
 
 def markdown(rows):
     """The table of docs/brouwer.md: one line per pair, the three rules side by side; a pair measured
-    with an older engine than ENGINE is marked †, and a pair re-measured shows the older engine's
-    exponent and iterations (now) beside."""
+    with an older engine than ENGINE is marked (MARKS: † the exact points' engine, ‡ the one before),
+    and a pair re-measured shows the older engine's exponent and iterations (now) beside."""
     lines = ["| system | pair | h | steps | reference (truncation) | it./step: now · fixed · extrapolate | "
-             "exponent now | fixed | extrapolate | now before the exact points (it./step) | "
+             "exponent now | fixed | extrapolate | now, the engine before (it./step) | "
              "RMS at 2·10⁵: now · fixed · extrapolate | mean / RMS at end (now) | law (no floor) · audit |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     left = []
@@ -305,7 +307,7 @@ def markdown(rows):
         b = fixed["steps"]
         bold = "**" if now["exponent"] <= EXPONENT_BOUND else ""
         law, verdict = laws(now)
-        mark = "" if row.get("engine", ENGINE) == ENGINE else " †"
+        mark = MARKS.get(row.get("engine", ENGINE), " ‡")
         bef = row.get("before")
         before = f"{bef['exponent']:.2f} ± {bef['spread']:.2f} ({bef['iterations']:.2f})" if bef else "—"
         lines.append(
