@@ -19,6 +19,16 @@ milliseconds, so a compilation waits for nothing measurable.  Where the lock fil
 behaviour is kept.  A save that cannot be written (a full disk, a file-size limit) is dropped
 instead of failing the compilation it follows: the code is compiled and runs, and the next
 process compiles it again.  The package installs both on import (``integrators/__init__.py``).
+
+It also makes processes that need the *same* signature compile it once: :func:`install` wraps
+``Dispatcher.compile`` of every cached function in an exclusive ``flock`` on a file named by the
+function's cache index and the signature (``poincare-compile/<hash>.lock`` in the cache folder).
+The first process compiles and saves; the others wait on the lock and then find the code in the
+cache (numba looks there first).  Without it every MPI rank of a run on a fresh machine compiled
+the step kernel at the same time (a few minutes each, one per core), and so did the test suite's
+workers.  Functions compile callee first-to-last in one order (the call graph has no cycles), so
+two processes never wait on each other; within a process the lock is taken under numba's compiler
+lock and at most once per signature (a nested compile of a held signature goes on without it).
 """
 from __future__ import annotations
 
@@ -76,4 +86,66 @@ def install() -> bool:
     locked_save.__doc__, locked_load.__doc__ = save.__doc__, load.__doc__
     cls.save, cls.load = locked_save, locked_load
     cls._poincare_locked = True
+    _install_compile_lock()
     return True
+
+
+COMPILE_LOCKS = "poincare-compile"
+_held = set()                       # the compile locks this process holds (under numba's compiler lock)
+
+
+def compile_lock_path(dispatcher, sig):
+    """The lock file of (cached function, signature), or None for a function without a disk cache."""
+    import hashlib
+    from numba.core import sigutils
+    cache = getattr(dispatcher, "_cache", None)
+    folder = getattr(cache, "_cache_path", None)
+    index = getattr(getattr(cache, "_cache_file", None), "_index_name", None)
+    if folder is None or index is None:
+        return None
+    args, _ = sigutils.normalize_signature(sig)
+    key = hashlib.sha256(f"{index}|{tuple(args)}".encode()).hexdigest()[:32]
+    return os.path.join(folder, COMPILE_LOCKS, key + ".lock")
+
+
+@contextlib.contextmanager
+def compile_locked(path):
+    """Holds the exclusive lock ``path`` (once per process: nested, or where the file cannot be
+    made, the block runs without it)."""
+    if path is None or path in _held:
+        yield
+        return
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        _held.add(path)
+        yield
+    finally:
+        _held.discard(path)
+        os.close(fd)
+
+
+def _install_compile_lock():
+    from numba.core import sigutils
+    from numba.core.compiler_lock import global_compiler_lock
+    from numba.core.dispatcher import Dispatcher
+    if getattr(Dispatcher, "_poincare_compile_locked", False):
+        return
+    compile_ = Dispatcher.compile
+
+    def compile(self, sig):
+        args, _ = sigutils.normalize_signature(sig)
+        if tuple(args) in self.overloads:       # compiled or loaded in this process already
+            return compile_(self, sig)
+        with global_compiler_lock:              # the file lock inside numba's: threads never wait crosswise
+            with compile_locked(compile_lock_path(self, sig)):
+                return compile_(self, sig)
+
+    compile.__doc__ = compile_.__doc__
+    Dispatcher.compile = compile
+    Dispatcher._poincare_compile_locked = True

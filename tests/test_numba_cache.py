@@ -54,12 +54,17 @@ print(kernelmod.add_one(1.5), kernelmod.add_one(1), sum(kernelmod.add_one.stats.
 """
 
 
-def _race(folder, locked):
+def _folder(folder, **scripts):
+    """The module and the scripts in a fresh folder; the environment of a cache of its own."""
     folder.mkdir()
     (folder / "kernelmod.py").write_text(textwrap.dedent(MODULE))
-    (folder / "child.py").write_text(textwrap.dedent(CHILD))
-    (folder / "reader.py").write_text(textwrap.dedent(READER))
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(folder / "cache"))
+    for name, text in scripts.items():
+        (folder / f"{name}.py").write_text(textwrap.dedent(text))
+    return dict(os.environ, NUMBA_CACHE_DIR=str(folder / "cache"))
+
+
+def _race(folder, locked):
+    env = _folder(folder, child=CHILD, reader=READER)
     mode = "locked" if locked else "plain"
     children = [subprocess.Popen([sys.executable, "child.py", role, mode], cwd=folder, env=env,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for role in "AB"]
@@ -101,3 +106,51 @@ def test_a_cache_that_cannot_be_written_does_not_fail_the_compilation(tmp_path, 
         assert r.returncode != 0 and "File too large" in r.stderr
     else:
         assert r.returncode == 0 and r.stdout.split() == ["2.5"], r.stderr
+
+
+# The same signature needed by two processes at once (MPI ranks on a fresh machine, the suite's
+# workers): A holds the signature's compile lock, lets B start, waits 2 s and only then compiles and
+# saves; B asks for the same function meanwhile.
+HOLDER = """
+import os, time
+import integrators
+from integrators import numba_cache
+from numba.core import types
+import kernelmod
+with numba_cache.compile_locked(numba_cache.compile_lock_path(kernelmod.add_one, (types.int64,))):
+    open("locked", "w").close()
+    while not os.path.exists("asking"):
+        time.sleep(0.002)
+    time.sleep(2.0)
+    print(kernelmod.add_one(1))
+"""
+
+ASKER = """
+import os, sys, time
+if sys.argv[1] == "locked":
+    import integrators                                   # installs the locks on import
+while not os.path.exists("locked"):
+    time.sleep(0.002)
+import kernelmod
+open("asking", "w").close()
+print(kernelmod.add_one(1), sum(kernelmod.add_one.stats.cache_hits.values()),
+      sum(kernelmod.add_one.stats.cache_misses.values()))
+"""
+
+
+def _same_signature(folder, locked):
+    env = _folder(folder, holder=HOLDER, asker=ASKER)
+    run = [subprocess.Popen([sys.executable, *args], cwd=folder, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+           for args in (["holder.py"], ["asker.py", "locked" if locked else "plain"])]
+    outs = [c.communicate(timeout=120) for c in run]
+    assert [c.returncode for c in run] == [0, 0], outs
+    assert outs[0][0].split() == ["2"]
+    return outs[1][0].split()
+
+
+def test_a_signature_two_processes_need_at_once_is_compiled_once(tmp_path):
+    # unlocked, the second process compiles it too (a cache miss: nothing was saved yet)
+    assert _same_signature(tmp_path / "plain", locked=False) == ["2", "0", "1"]
+    # locked, it waits for the first one's compilation and loads it from the cache
+    assert _same_signature(tmp_path / "locked", locked=True) == ["2", "1", "0"]
