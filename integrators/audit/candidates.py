@@ -26,9 +26,13 @@ def stepper_map(tableau, projection) -> Callable:
     One call is one step of the compiled engine from the vector-field guess (no history): the
     Newton solution does not depend on the guess beyond its tolerance.  Accepts complex arrays:
     the engine's complex128 specialisation carries the derivatives (complex step) through the
-    Newton solve.  A point whose step fails is NaN.
+    Newton solve.  A point whose step fails is NaN.  Real points take the engine's vector path
+    even when there are fewer than its W = kernel.LANES lanes (a point's bits do not depend on W):
+    an audit on a few points, such as the check :func:`integrators.audit.discrimination` makes
+    before every run, then compiles no scalar kernel beside the one the run compiles.
     """
     from ..engine import Engine
+    from ..kernel import LANES
     cache = {}
 
     def step(q, p, lam, h, system):
@@ -39,7 +43,7 @@ def stepper_map(tableau, projection) -> Callable:
         q, p, lam = (np.asarray(x) for x in (q, p, lam))
         dtype = np.complex128 if any(np.iscomplexobj(x) for x in (q, p, lam)) else np.float64
         st = engine.state(q, p, lam, dtype=dtype)
-        engine.advance(st, 1, 1)
+        engine.advance(st, 1, 1, lanes=engine.lanes_for(max(q.shape[0], LANES)))
         q1, p1, lam1 = st.q, st.p, st.Lam / h
         bad = ~st.live
         for x in (q1, p1, lam1):
