@@ -122,7 +122,11 @@ def compile_locked(path):
         yield
         return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:             # a file system without locks (some NFS mounts): compile unlocked
+            yield
+            return
         _held.add(path)
         yield
     finally:
