@@ -109,8 +109,8 @@ def test_a_cache_that_cannot_be_written_does_not_fail_the_compilation(tmp_path, 
 
 
 # The same signature needed by two processes at once (MPI ranks on a fresh machine, the suite's
-# workers): A holds the signature's compile lock, lets B start, waits 2 s and only then compiles and
-# saves; B asks for the same function meanwhile.
+# workers): A holds the signature's compile lock, lets B start, waits 5 s (room for a loaded machine)
+# and only then compiles and saves; B asks for the same function meanwhile.
 HOLDER = """
 import os, time
 import integrators
@@ -121,7 +121,7 @@ with numba_cache.compile_locked(numba_cache.compile_lock_path(kernelmod.add_one,
     open("locked", "w").close()
     while not os.path.exists("asking"):
         time.sleep(0.002)
-    time.sleep(2.0)
+    time.sleep(5.0)
     print(kernelmod.add_one(1))
 """
 
