@@ -15,8 +15,8 @@ next (the predictor's history), not from the step's equations.
         --steps 50000 --ksteps 64 --rule 'extrapolate={"predictor": "extrapolate"}'
 
 Each rule is a Tolerances(**JSON) beside the default (``now``); every measurement uses the study's
-16 starts about the system's default start (brouwer_law.degenerate).  About 2 minutes a pair with
-``--ksteps 64`` on 2 cores (the double-double steps from 91,000 states).
+16 starts about the system's default start (brouwer_law.degenerate).  About 3-4 minutes a pair and
+rule with ``--ksteps 64`` on 2 cores beside other jobs (the double-double steps from 114,000 states).
 """
 from __future__ import annotations
 
