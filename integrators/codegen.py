@@ -2,7 +2,7 @@
 an on-disk cache and compiled by numba once per machine.
 
 :func:`point_functions` gives the engine (integrators/engine.py) and the kernel
-(integrators/kernel.py) what they call for a system: ϑ, ϑ_q, ∇H and, for Jacobians, ϑ_qq and ∇²H
+(integrators/kernel/) what they call for a system: ϑ, ϑ_q, ∇H and, for Jacobians, ϑ_qq and ∇²H
 at one point (or W points in lanes, or a complex-step point, or in double-double), with common
 subexpressions shared, and the domain test.  The source (:func:`generate_source`,
 :func:`generate_dd_source`) is written to ``$POINCARE_CACHE/kernels`` (or

@@ -29,6 +29,14 @@ the step kernel at the same time (a few minutes each, one per core), and so did 
 workers.  Functions compile callee first-to-last in one order (the call graph has no cycles), so
 two processes never wait on each other; within a process the lock is taken under numba's compiler
 lock and at most once per signature (a nested compile of a held signature goes on without it).
+
+And it keeps a cached function from outliving a change to the code it calls.  numba checks a
+cached function against its own file's time stamp only, but its machine code holds every compiled
+function it calls, inlined or not, from whichever module.  The kernel is split by role over
+integrators/kernel/*.py and calls integrators/simd.py and ddouble.py: editing the Newton module
+alone would leave ``advance`` cached with the old Newton in it.  So :func:`install` makes the source
+stamp of every cached function of this package the stamps of all the package's modules that
+compile code (:func:`compiled_sources`): a change to any of them recompiles all of them.
 """
 from __future__ import annotations
 
@@ -87,7 +95,58 @@ def install() -> bool:
     cls.save, cls.load = locked_save, locked_load
     cls._poincare_locked = True
     _install_compile_lock()
+    _install_package_stamp()
     return True
+
+
+PACKAGE = os.path.dirname(os.path.abspath(__file__))
+_COMPILES = ("@njit", "@overload", "@intrinsic", "@register_jitable", "@generated_jit")
+
+
+def compiled_sources(root=None):
+    """The package's modules that define compiled functions (a decorator of numba's in their text),
+    sorted (this one only names them): what a cached function of the package may carry the machine
+    code of."""
+    found = []
+    for folder, dirs, files in os.walk(root or PACKAGE):
+        dirs[:] = sorted(x for x in dirs if not x.startswith((".", "__")))
+        for name in sorted(files):
+            path = os.path.join(folder, name)
+            if name.endswith(".py") and path != os.path.abspath(__file__):
+                with open(path, encoding="utf-8") as fh:
+                    if any(mark in fh.read() for mark in _COMPILES):
+                        found.append(path)
+    return found
+
+
+_stamps = {}
+
+
+def package_stamp():
+    """(path, mtime, size) of every module :func:`compiled_sources` lists, once per process."""
+    if PACKAGE not in _stamps:
+        _stamps[PACKAGE] = tuple((os.path.relpath(p, PACKAGE), os.stat(p).st_mtime, os.stat(p).st_size)
+                                 for p in compiled_sources())
+    return _stamps[PACKAGE]
+
+
+def _install_package_stamp():
+    from numba.core import caching
+    mixin = getattr(caching, "_SourceFileBackedLocatorMixin", None)
+    if mixin is None or getattr(mixin, "_poincare_stamped", False) or not hasattr(mixin, "get_source_stamp"):
+        return
+    own = mixin.get_source_stamp
+
+    def get_source_stamp(self):
+        stamp = own(self)
+        path = os.path.abspath(getattr(self, "_py_file", ""))
+        if path.startswith(PACKAGE + os.sep):
+            return stamp, package_stamp()
+        return stamp
+
+    get_source_stamp.__doc__ = own.__doc__
+    mixin.get_source_stamp = get_source_stamp
+    mixin._poincare_stamped = True
 
 
 COMPILE_LOCKS = "poincare-compile"

@@ -1,4 +1,4 @@
-"""Breakdowns and degenerate inputs (integrators/engine.py, kernel.py): adversarial inputs break nothing and bad points break down alone (docs/stability.md)."""
+"""Breakdowns and degenerate inputs (integrators/engine.py, kernel/): adversarial inputs break nothing and bad points break down alone (docs/stability.md)."""
 import re
 
 import h5py

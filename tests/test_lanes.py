@@ -1,4 +1,4 @@
-"""Points in SIMD lanes give every point the bits of the scalar path (integrators/kernel.py, simd.py).
+"""Points in SIMD lanes give every point the bits of the scalar path (integrators/kernel/, simd.py).
 
 The kernel advances W = kernel.LANES (8) or kernel.WIDE (16) points in lockstep with every decision
 per lane; these tests hold it to its promise: a point's bits are those it gets alone on the scalar
@@ -122,7 +122,7 @@ def _rounds_with_refill(busy, W, block):
 
 def test_lanes_are_refilled_and_each_point_keeps_its_bits(rng):
     """A lane whose point breaks down or has taken its steps takes up the next live point of the
-    block (integrators/kernel.py, _block): over two calls, with points dead from the start and
+    block (integrators/kernel/blocks.py, _block): over two calls, with points dead from the start and
     points breaking down in between, every point's bits equal W = 1's, and the group steps the
     kernel reports are exactly those of in-order refilling, each point holding its lane for the
     group steps it takes alone (its steps, one more for each second try and for a breakdown) —

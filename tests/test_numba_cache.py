@@ -154,3 +154,43 @@ def test_a_signature_two_processes_need_at_once_is_compiled_once(tmp_path):
     assert _same_signature(tmp_path / "plain", locked=False) == ["2", "0", "1"]
     # locked, it waits for the first one's compilation and loads it from the cache
     assert _same_signature(tmp_path / "locked", locked=True) == ["2", "1", "0"]
+
+
+CALLER = """
+from numba import njit
+from callee import value
+
+@njit(cache=True)
+def outer():
+    return value() + 1
+"""
+
+RUN_CALLER = """
+import sys
+import integrators
+from integrators import numba_cache
+numba_cache.PACKAGE = sys.argv[1]
+sys.path.insert(0, sys.argv[1])
+import caller
+print(caller.outer())
+"""
+
+
+def test_a_change_to_a_module_a_cached_function_calls_recompiles_it(tmp_path):
+    """numba checks a cached function against its own file only, but its machine code holds its
+    callees': the package's stamp (every module of the package that compiles code) makes a change to
+    the callee's module alone recompile the caller, which numba would load stale."""
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "caller.py").write_text(CALLER)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
+    def outer(body):
+        (pkg / "callee.py").write_text("from numba import njit\n\n@njit\ndef value():\n    return %s\n" % body)
+        out = subprocess.run([sys.executable, "-c", RUN_CALLER, str(pkg)], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        return int(out.stdout.split()[-1])
+
+    assert outer("1") == 2
+    assert any(p.suffix == ".nbi" for p in (tmp_path / "cache").rglob("*"))     # the caller was cached
+    assert outer("41") == 42                     # numba alone loads the cached caller: 2

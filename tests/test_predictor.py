@@ -1,7 +1,7 @@
 """The stage predictor (issue 55): the last step's stages extrapolated, corrected by the last steps'
 defects extrapolated (a polynomial, or a linear recurrence fitted to them), each step at the order
 that did best on the step before, and a Jacobian at the guess where the last guess was good but not
-within the refresh floor (at every step, or on a schedule of step numbers) (integrators/kernel.py, _recurrence,
+within the refresh floor (at every step, or on a schedule of step numbers) (integrators/kernel/predictor.py, _recurrence,
 _guess, _remember and _step).
 
 The iteration counts are the engine's arithmetic, not the machine's speed: they hold anywhere."""

@@ -29,7 +29,7 @@ from numba import njit
 import integrators
 from integrators.boozer import read_boozmn, system_from_boozer
 from integrators.codegen import point_functions
-from integrators.kernel import _at, lanes
+from integrators.simd import _at, lanes
 from integrators.splines3 import field3
 
 LI383 = Path(integrators.__file__).parent / "service" / "scenes" / "boozmn_li383_low_res.nc"

@@ -1,0 +1,161 @@
+"""Newton's method on W lanes at once: the exact Jacobian factorised per lane and kept while it
+contracts (:func:`_newton`), the update and its size (:func:`_update`) and the stopping rule
+(:func:`_judge`), all with masks and selects, every decision per lane."""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..simd import anyl, at, is_complex, ld, ldi, lget, lset, mand, mnot, mor, nlanes, sel, st, sti, step_measure
+from .records import COMPLEX_STEP, MODE_MAIN, _OPTS
+from .linalg import lu_factor, lu_solve
+from .equations import _main
+from .projection import post_term
+
+
+@njit(inline='always', **_OPTS)
+def _keep_factors(LU, piv, Jt, pivt, stale, nz):
+    """The fresh factors Jt, pivt (every lane's) into LU, piv for the lanes that asked (``stale``)."""
+    for i in range(nz * nz):
+        st(LU, i, sel(stale, ld(Jt, i), ld(LU, i)))
+    for i in range(nz):
+        sti(piv, i, sel(stale, ldi(pivt, i), ldi(piv, i)))
+
+
+@njit(inline='always', **_OPTS)
+def _note_jacobian(z, stale, nz, d, w, S):
+    """The point a fresh Jacobian was taken at (the iterate z, and the step's q_n and Λ_n) into jz,
+    jq, jl for the lanes ``stale``."""
+    jz, jq, jl, q, lam = at(w, S.jz), at(w, S.jq), at(w, S.jl), at(w, S.q), at(w, S.lam)
+    for i in range(nz):
+        st(jz, i, sel(stale, ld(z, i), ld(jz, i)))
+    for m in range(d):
+        st(jq, m, sel(stale, ld(q, m), ld(jq, m)))
+        st(jl, m, sel(stale, ld(lam, m), ld(jl, m)))
+
+
+@njit(inline='always', **_OPTS)
+def _update(z, r, done, scale, nz, f, F):
+    """z −= δ (r holds −δ) in the lanes not done; per lane the update's size max |δ|/scale
+    (``F.norm``), whether it was NaN and whether the new z is finite."""
+    size = sel(done, 0.0, 0.0)
+    nan = done
+    finite = mnot(done)
+    for i in range(nz):
+        ri = ld(r, i)
+        zi = ld(z, i) - ri
+        st(z, i, sel(done, ld(z, i), zi))
+        v = step_measure(ri, ld(scale, i), COMPLEX_STEP)
+        nan = mor(nan, v != v)
+        size = sel(v > size, v, size)
+        finite = mand(finite, np.isfinite(zi))
+    st(f, F.norm, size)
+    st(f, F.nan, sel(nan, 1.0, 0.0))
+    st(f, F.finite, sel(finite, 1.0, 0.0))
+
+
+@njit(inline='always', **_OPTS)
+def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
+    """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol, or
+    ≤ fine² (an update of 10⁻²⁸ of its coordinate, far below what even the compensation term of q
+    holds: there is nothing left to halve), or ≤ stall once the update stops halving: within ``fine`` (64 ulps), or wherever the
+    iteration before was a Newton step with a Jacobian at its own iterate, after which the update
+    falls quadratically unless round-off stops it; factors carried from an earlier step or iterate
+    can stop halving far above the floor, or even grow, when the guess was poor: stopping there
+    left errors of 10⁴ ulps of one sign in single steps (tests/test_boozer.py), so such a lane
+    takes a fresh Jacobian and goes on; from its ``least``-th iteration on: with the defects'
+    guess 2, because at small steps that guess is often within tol already, and taking it, not the
+    iterate after it, left its extrapolation error, a few ulps of the same sign, in every step:
+    SRK3-standard on point vortices at h = 2⁻¹³, 16,384 steps, momentum off by 1.0·10⁻¹³ against
+    4.6·10⁻¹⁵ from the extrapolation alone) or on, with a fresh Jacobian next time if this
+    iteration contracted by θ > ``refresh``, its update was larger than ``floor`` (an update a few
+    thousand ulps small measures round-off, not the factors: a Jacobian there was the engine's
+    largest waste on high-order pairs, docs/benchmarks.md) and θ^horizon·|δ| > tol: the factors
+    would not converge within ``horizon`` more iterations, about what a Jacobian costs in
+    iterations plus the two it takes after (``horizon`` 0: the first two tests alone).  Written
+    with masks and selects, so W lanes are judged at once (the same comparisons and the one division of the scalar path, lane by lane)."""
+    on = ld(f, F.done) == 0.0
+    st(f, F.its, ld(f, F.its) + sel(on, 1.0, 0.0))
+    sz, prev = ld(f, F.norm), ld(f, F.prev)
+    failed = mor(mor(ld(f, F.nan) != 0.0, ld(f, F.finite) == 0.0), mnot(np.isfinite(sz)))
+    theta = sel(np.isfinite(prev), sz / prev, np.inf)
+    slow = mand(np.isfinite(theta), theta > 0.5)
+    floored = mor(mand(mand(sz <= stall, slow), mor(ld(f, F.exact) != 0.0, sz <= fine)), sz <= fine * fine)
+    converged = mand(mand(mnot(failed), mor(sz <= tol, floored)), ld(f, F.its) >= least)
+    ends = mand(on, mor(failed, converged))
+    goes = mand(on, mnot(ends))
+    st(f, F.done, sel(ends, 1.0, ld(f, F.done)))
+    st(f, F.ok, sel(mand(on, converged), 1.0, ld(f, F.ok)))
+    left = sel(goes, np.inf, np.inf)             # |δ| after ``horizon`` more iterations at rate θ
+    if horizon > 0.0:
+        left = sz
+        for _ in range(int(horizon)):
+            left = left * theta
+    tired = mand(mand(np.isfinite(theta), theta > refresh), mand(mor(sz > floor, slow), left > tol))   # slow: not floored
+    st(f, F.exact, sel(goes, ld(f, F.stale), ld(f, F.exact)))     # this iteration's: the next one's judge
+    st(f, F.stale, sel(goes, sel(tired, 1.0, 0.0), ld(f, F.stale)))
+    st(f, F.prev, sel(goes, sz, prev))
+
+
+@njit(**_OPTS)
+def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
+    """Newton's method with the exact Jacobian, kept while it contracts, for every active lane.
+
+    ``mode`` MODE_MAIN solves the step's equations (:func:`_main`), MODE_POST the consecutive projection
+    (its post term ``P.post``: :func:`project` for the paper's).  A lane's Jacobian is evaluated and factorised at its first iteration (unless
+    ``known``: LU and piv hold its last step's factors) and again after an iteration that shrank
+    its update by less than REFRESH.  A lane has converged when max |δ|/scale ≤ STALL once the
+    update stops halving within 64 ulps or after an exact Newton step (older factors that stop
+    halving above that are refreshed, not taken for the floor: :func:`_judge`), or ≤ TOL (0 by default: every step ends at its round-off floor, so what
+    it leaves is round-off and not a remainder of one sign: Brouwer's law, docs/brouwer.md); for complex z the imaginary part, read as a derivative, must pass the
+    same test.  A lane that is done is held at its solution ``zev`` (the last iterate at which its
+    residual was evaluated; every buffer the equations fill holds that evaluation) while the others
+    go on.  Lanes to solve: ``f.active``; the outcome per lane in ``f.ok`` and ``f.its``.  The
+    tolerances are runtime data, ``P.cfg`` a :class:`Newton` record (:class:`integrators.engine.Tolerances`);
+    with ``cfg.accept`` a finite iterate that has not converged after ``cfg.maxiter`` iterations is
+    taken (GeometricIntegrators.jl's stopping rule).
+    """
+    W = nlanes(z)           # (mode and nz arrive as runtime ints: a literal would compile this twice)
+    w, S, f, F, ip, IP, cfg = g.w, g.S, g.f, g.F, g.ip, g.IP, P.cfg
+    tol, refresh = cfg.tol, cfg.refresh
+    active = ld(f, F.active) != 0.0
+    st(f, F.done, sel(active, 0.0, 1.0))
+    st(f, F.ok, 0.0)
+    st(f, F.its, 0.0)
+    st(f, F.prev, np.inf)
+    st(f, F.stale, sel(mand(active, mnot(known)), 1.0, 0.0))
+    st(f, F.exact, 0.0)
+    scale = at(f, F.scale if mode == MODE_MAIN else F.pscale)
+    Jt = at(w, S.Jt if mode == MODE_MAIN else S.pJ)
+    pivt = at(ip, IP.pivt)
+    for _ in range(int(cfg.maxiter)):
+        done = ld(f, F.done) != 0.0
+        if not anyl(mnot(done)):
+            break
+        stale = ld(f, F.stale) != 0.0
+        for i in range(nz):
+            zi = sel(done, ld(zev, i), ld(z, i))
+            st(z, i, zi)
+            st(zev, i, zi)
+        jac = anyl(stale)
+        Jx, pivx = (LU, piv) if W == 1 else (Jt, pivt)   # one lane: factorise in place
+        if mode == MODE_MAIN:
+            _main(z, jac, r, Jx, ev, P.k, P.h, P.tb, P.plan, d, s, w, S)
+        else:
+            post_term(P.post, z, jac, r, Jx, ev, P.k, P.plan.sigma, d, g.w, g.S)
+        if jac:
+            lset(f, F.gjac, 0, lget(f, F.gjac, 0) + 1.0)
+            lu_factor(Jx, pivx, nz)
+            if W > 1:                             # every lane factorised, the lanes that asked keep theirs
+                _keep_factors(LU, piv, Jt, pivt, stale, nz)
+            if mode == MODE_MAIN:                 # where they were taken: what refactor() rebuilds them from
+                _note_jacobian(z, stale, nz, d, w, S)
+                st(f, F.age, sel(stale, 0.0, ld(f, F.age)))
+        lu_solve(LU, piv, r, nz)                  # r is now −δ
+        lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
+        _update(z, r, done, scale, nz, f, F)
+        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, cfg.fine, refresh, cfg.floor, cfg.horizon,
+               cfg.least)
+    for l in range(W):                            # lanes out of iterations
+        if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
+            lset(f, F.ok, l, 1.0)

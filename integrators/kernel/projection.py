@@ -1,0 +1,74 @@
+"""The post term of the projections solved after Ψ_h: the paper's (:func:`project`,
+eq:orthogonal_projection, eq:symplectic_projection_post) and the contract a projection's own
+compiled post term follows (:func:`post_term` chooses between them when the kernel is compiled;
+docs/engine.md, "A projection of one's own")."""
+from __future__ import annotations
+
+from numba import njit, types
+from numba.extending import overload
+
+from ..projections import END
+from ..simd import at, ld, st
+from .records import _OPTS
+from .linalg import _apply, _contract, rounding, _tapply
+from .equations import _eval, exact_points
+
+
+@njit(inline='always', **_OPTS)
+def project(z, jac, r, J, ev, k, sig, d, w, S):
+    """The post term of the consecutive projections (standard, symplectic): ϑ(q̂ + σΛ) = p̂ + σ
+    ϑ_q(q̂ + σΛ)ᵀΛ, to be solved for Λ (eq:orthogonal_projection, eq:symplectic_projection_post).
+
+    The contract of every post term (a projection's ``post_term``; :func:`_newton` calls it in
+    MODE_POST, d unknowns): from the core's unprojected end point q̂, p̂ (``S.qh``, ``S.ph``, the
+    step's q̄ + ΣbY, p̄ + ΣbG) and the iterate Λ = ``z``, write p_{n+1} into ``S.p1``, the d
+    residuals into ``r`` and, when ``jac``, their Jacobian ∂r/∂Λ row-major into ``J``.  The kernel
+    then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1}; ``ev(x, k, jac, …)`` at a
+    point slot (:func:`_eval`) gives ϑ and its derivatives.  In plain doubles (``exact_points``)
+    ``S.qhe`` and ``S.phe`` hold what rounding q̂ and p̂ to double dropped: a post term resolves Λ
+    below an ulp of q when its residual sees its sums exactly, as this one does (ϑ at q̂ + σΛ as
+    ϑ + ϑ_q e, e that error plus its own sum's, :func:`rounding`; p̂ + σϑ_qᵀΛ with its errors
+    added); one that does not still converges, to an ulp of q."""
+    dd = d * d
+    qh, ph, q1, p1, tl = at(w, S.qh), at(w, S.ph), at(w, S.q1), at(w, S.p1), at(w, S.tl)
+    th1, T1, TT1 = at(w, S.pth + END * d), at(w, S.pT + END * dd), at(w, S.pTT + END * dd * d)
+    exact = exact_points(ld(qh, 0))
+    e1, te = at(w, S.eQ), at(w, S.tE)
+    for m in range(d):
+        q1m = ld(qh, m) + sig * ld(z, m)
+        st(q1, m, q1m)
+        if exact:
+            st(e1, m, ld(w, S.qhe + m) + rounding(ld(qh, m), sig * ld(z, m), q1m))
+    _eval(ev, k, q1, jac, w, S, END, d)
+    _tapply(T1, z, tl, d)
+    if exact:
+        _apply(T1, e1, te, d)
+    for m in range(d):
+        p1m = ld(ph, m) + sig * ld(tl, m)
+        st(p1, m, p1m)
+        rm = p1m - ld(th1, m)
+        if exact:
+            rm = (rm + (ld(w, S.phe + m) + rounding(ld(ph, m), sig * ld(tl, m), p1m))) - ld(te, m)
+        st(r, m, rm)
+    if jac:
+        S1 = at(w, S.S + dd)
+        _contract(TT1, z, S1, d)
+        for m in range(d):
+            for n in range(d):
+                st(J, m * d + n, sig * (ld(T1, n * d + m) - ld(T1, m * d + n)) + (sig * sig) * ld(S1, m * d + n))
+
+
+PAPER = 0      # ``post`` of the paper's projections: :func:`project`, compiled in (a function argument
+#                would key the kernel on a Python object, which numba's cache cannot find again)
+
+
+def post_term(post, z, jac, r, J, ev, k, sig, d, w, S):
+    """The post term ``post`` (PAPER: :func:`project`; else a projection's own compiled function,
+    called with the same arguments), chosen when the kernel is compiled."""
+
+
+@overload(post_term, inline="always")
+def _post_term(post, z, jac, r, J, ev, k, sig, d, w, S):
+    if isinstance(post, types.Integer):
+        return lambda post, z, jac, r, J, ev, k, sig, d, w, S: project(z, jac, r, J, ev, k, sig, d, w, S)
+    return lambda post, z, jac, r, J, ev, k, sig, d, w, S: post(z, jac, r, J, ev, k, sig, d, w, S)
