@@ -1,7 +1,7 @@
 """One (projected) VPRK step in mpmath at 50 digits: the oracle of the double-double engine.
 
 The equations of integrators/projections.py's table written plainly (eq:vprk_1–eq:vprk_3 and each
-projection's eq:…_pre / eq:…_post, as integrators/kernel.py solves them), on mpmath numbers, with
+projection's eq:…_pre / eq:…_post, as integrators/kernel/ solves them), on mpmath numbers, with
 ϑ, ϑ_q and ∇H from the system's sympy expressions (our own built-in systems' expressions, turned
 into mpmath functions by sympy.lambdify) and the tableau's 50-digit coefficients
 (``Tableau.exact``).  Each solve is mpmath's multidimensional Newton to 1e-45.
@@ -23,7 +23,7 @@ class Oracle:
         if rec.post_term is not None:
             raise ValueError(f"projection '{rec.name}' has its own post term, which the oracle does not apply (it "
                              "solves the paper's projection)")
-        self.rec, self.sigma = rec, mpmath.mpf(rec.sigma(tableau))
+        self.rec, self.sigma, self.alpha = rec, mpmath.mpf(rec.sigma(tableau)), mpmath.mpf(rec.alpha(tableau))
         ex = tableau.exact
         self.a = [[mpmath.mpf(ex["a"][i, j]) for j in range(self.s)] for i in range(self.s)]
         self.abar = [[mpmath.mpf(ex["abar"][i, j]) for j in range(self.s)] for i in range(self.s)]
@@ -77,17 +77,17 @@ class Oracle:
 
     def step(self, q, p, lam):
         """(q₁, p₁, Λ₁) from (q, p, Λ = hλ of the last step), mpmath lists of d numbers."""
-        s, d, h, sig, rec = self.s, self.d, self.h, self.sigma, self.rec
+        s, d, h, sig, al, rec = self.s, self.d, self.h, self.sigma, self.alpha, self.rec
         q = [mpmath.mpf(x) for x in q]
         p = [mpmath.mpf(x) for x in p]
         lam = [mpmath.mpf(x) for x in lam]
         pre = rec.pre
-        qbar = [q[m] + lam[m] for m in range(d)] if pre == "previous" else list(q)
+        qbar = [q[m] + al * lam[m] for m in range(d)] if pre == "previous" else list(q)
         pbar = self.th(q) if rec.post else list(p)
         Tq = self.T(q)
         if pre == "previous":
             tl = self.tapply(Tq, lam)
-            pbar = [pbar[m] + tl[m] for m in range(d)]
+            pbar = [pbar[m] + al * tl[m] for m in range(d)]
         coupled = pre == "unknown"
 
         lob = self.dvec is not None
@@ -96,7 +96,7 @@ class Oracle:
         def parts(z):
             Y = [z[i * d:(i + 1) * d] for i in range(s)]
             L = z[s * d:s * d + d] if coupled else [mpmath.mpf(0)] * d
-            q0 = [qbar[m] + L[m] for m in range(d)]
+            q0 = [qbar[m] + al * L[m] for m in range(d)]
             Q = [[q0[m] + mpmath.fsum(self.a[i][j] * Y[j][m] for j in range(s)) for m in range(d)] for i in range(s)]
             G = []
             for i in range(s):
@@ -117,7 +117,7 @@ class Oracle:
             if coupled:
                 Tp = pre_T(q0, sY)
                 tl = self.tapply(Tp, L)
-                pb = [pbar[m] + tl[m] for m in range(d)]
+                pb = [pbar[m] + al * tl[m] for m in range(d)]
             r = []
             mu = list(z[iM:iM + d]) if lob else None
             for i in range(s):
@@ -146,7 +146,7 @@ class Oracle:
         if coupled:
             q1 = [q0[m] + sY[m] + sig * L[m] for m in range(d)]
             Tp = pre_T(q0, sY)
-            pb = [pbar[m] + x for m, x in enumerate(self.tapply(Tp, L))]
+            pb = [pbar[m] + al * x for m, x in enumerate(self.tapply(Tp, L))]
             Tpost = self.T(q1) if rec.post_at == "end" else Tp
             tl = self.tapply(Tpost, L)
             return q1, [pb[m] + sG[m] + sig * tl[m] for m in range(d)], L

@@ -30,6 +30,7 @@ p_n = ϑ(q_n) (eq:fibre_derivative); ``none`` carries its own p_n.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 
 PROJECTIONS = ("none", "standard", "symmetric", "symplectic", "midpoint")
@@ -50,8 +51,14 @@ class Projection:
     pre_at : where ϑ_q of the perturbation is taken: 'start' (q_n) or 'midpoint' (q̄_{n+1/2})
     post : whether a projection follows Ψ_h (and the step starts on the constraint p_n = ϑ(q_n))
     post_at : where ϑ_q of the projection is taken: 'end' (q_{n+1}) or 'midpoint'
-    sign : the projection's factor σ: 'one' or 'R_inf' (the tableau's R(∞), which must be ±1)
+    sign : whether the post term's weight σ is multiplied by the tableau's R(∞) ('R_inf', which
+          needs |R(∞)| = 1) or not ('one')
     labels : the paper's equations it implements
+    weight : the post term's number: σ = weight (× R(∞) under 'R_inf')
+    pre_weight, pre_sign : the same for the perturbation before Ψ_h, α = pre_weight (× R(∞) under
+          'R_inf'): q̃ = q̄ + αΛ, p̃ = p̄ + α ϑ_q(x_pre)ᵀΛ.  The paper's rows all have α = 1;
+          GeometricIntegrators.jl's projections are such weights before and after the step.  Only a
+          row with a perturbation (``pre`` not 'none') may set them
     post_term : for a projection solved after Ψ_h (``post`` and not coupled), the compiled function
           whose root in Λ ends the step; None: the paper's, :func:`integrators.kernel.project`
           (ϑ(q̂ + σΛ) = p̂ + σ ϑ_q(q̂ + σΛ)ᵀΛ).  Its contract is in that function's docstring;
@@ -66,6 +73,9 @@ class Projection:
     sign: str
     labels: tuple
     post_term: object = None
+    weight: float = 1.0
+    pre_weight: float = 1.0
+    pre_sign: str = "one"
 
     def __post_init__(self):
         # the name is a run file's group name after the tableau's and a '-' (output.split_pair_name):
@@ -73,19 +83,34 @@ class Projection:
         if not isinstance(self.name, str) or not re.fullmatch(r"[A-Za-z0-9_]+", self.name):
             raise ValueError(f"a projection's name must be letters, digits and '_' (it follows the tableau's name "
                              f"and a '-' in run files), got {self.name!r}")
+        for field in ("sign", "pre_sign"):
+            if getattr(self, field) not in ("one", "R_inf"):
+                raise ValueError(f"projection '{self.name}': {field} must be 'one' or 'R_inf', got {getattr(self, field)!r}")
+        for field in ("weight", "pre_weight"):
+            x = getattr(self, field)
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise ValueError(f"projection '{self.name}': {field} must be a finite number, got {x!r}")
+        if self.pre == "none" and (self.pre_weight != 1.0 or self.pre_sign != "one"):
+            raise ValueError(f"projection '{self.name}' has no perturbation before the step (pre 'none'): "
+                             "its pre_weight and pre_sign cannot be set")
 
     @property
     def coupled(self) -> bool:
         return self.pre == "unknown"
 
     def sigma(self, tableau) -> float:
-        return 1.0 if self.sign == "one" else float(tableau.R_inf)
+        """σ, the post term's weight for ``tableau``."""
+        return float(self.weight) * (1.0 if self.sign == "one" else float(tableau.R_inf))
+
+    def alpha(self, tableau) -> float:
+        """α, the weight of the perturbation before Ψ_h for ``tableau``."""
+        return float(self.pre_weight) * (1.0 if self.pre_sign == "one" else float(tableau.R_inf))
 
     def codes(self, tableau) -> tuple:
-        """(pre, pre_at, post, post_at, σ) as the kernel reads them."""
+        """(pre, pre_at, post, post_at, σ, α) as the kernel reads them (:class:`integrators.kernel.Plan`)."""
         pre = {"none": PRE_NONE, "unknown": PRE_UNKNOWN, "previous": PRE_PREVIOUS}[self.pre]
         at = {"start": START, "midpoint": MIDPOINT, "end": END}
-        return (pre, at[self.pre_at], bool(self.post), at[self.post_at], self.sigma(tableau))
+        return (pre, at[self.pre_at], bool(self.post), at[self.post_at], self.sigma(tableau), self.alpha(tableau))
 
 
 RECORDS = {r.name: r for r in (
@@ -127,7 +152,7 @@ def admission(tableau, projection):
     rec = projection_record(projection)
     if rec.post_term is not None and (not rec.post or rec.coupled):
         return f"projection '{rec.name}' has a post term but is not solved after Ψ_h (post, not coupled)"
-    if rec.sign == "R_inf" and abs(tableau.R_inf) != 1.0:
+    if "R_inf" in (rec.sign, rec.pre_sign) and abs(tableau.R_inf) != 1.0:
         return (f"projection '{rec.name}' needs |R(∞)| = 1 but {tableau.name} has R(∞) = {tableau.R_inf:.17g}; "
                 "use 'none' or 'standard'")
     return None

@@ -339,7 +339,7 @@ class Stepper:
         if rec.post_term is not None:
             raise ValueError(f"projection '{rec.name}' has its own post term, which the reference engine does not "
                              "apply (it solves the paper's projection): compare it with the compiled engine only")
-        self.sigma = rec.sigma(tableau)
+        self.sigma, self.alpha = rec.sigma(tableau), rec.alpha(tableau)
         self.coupled = rec.coupled
         self.lobatto = tableau.d is not None
         s, d = tableau.s, system.d
@@ -380,8 +380,8 @@ class Stepper:
         if not rec.post:                         # unprojected: the method's own p_n
             qbar, pbar = q, p
         elif rec.pre == "previous":              # the last step's Λ_n first (eq:symplectic_projection_pre)
-            qbar = q + Lam
-            pbar = sysm.theta(q) + transpose_apply(sysm.dtheta(q), Lam)
+            qbar = q + self.alpha * Lam
+            pbar = sysm.theta(q) + self.alpha * transpose_apply(sysm.dtheta(q), Lam)
         else:                                    # on the constraint p_n = ϑ(q_n)
             qbar, pbar = q, sysm.theta(q)
         Theta_q = sysm.dtheta(q) if rec.coupled and rec.pre_at == "start" else None
@@ -402,14 +402,14 @@ class Stepper:
             m = z.shape[0]
             q0, pb = qbar[idx], pbar[idx]
             if self.coupled:
-                q0 = q0 + L
+                q0 = q0 + self.alpha * L
                 sumbY = weigh(tab.b, tab.b_lo, Y)
                 if rec.pre_at == "start":
                     Tx = Theta_q[idx]
                 else:  # ϑ_q at the unprojected midpoint
                     M = q0 + 0.5 * sumbY
                     Tx = sysm.dtheta(M)
-                pb = pb + transpose_apply(Tx, L)
+                pb = pb + self.alpha * transpose_apply(Tx, L)
             st = Stages(sysm, tab, h, q0, Y, jacobian=jacobian)
             res = [stage_residual(tab, st, pb, mu).reshape(m, sd)]
             sumbG = weigh(tab.b, tab.b_lo, st.G)
@@ -420,7 +420,7 @@ class Stepper:
                 p1 = pb + sumbG + sig * transpose_apply(Tp, L)
                 res.append(p1 - sysm.theta(q1))
                 # what the step needs at this iterate: q increment (perturbation, Ψ_h, projection), p_{n+1}
-                extras = {"inc_q": (L + sumbY) + sig * L, "p": p1}
+                extras = {"inc_q": (self.alpha * L + sumbY) + sig * L, "p": p1}
             else:
                 extras = {"sumbY": weigh(tab.b, tab.b_lo, Y), "sumbG": sumbG}
             if self.lobatto:
@@ -439,7 +439,7 @@ class Stepper:
         """The exact Jacobian (m, nz, nz) of the step's equations at the stage values ``st``: the
         stage blocks, the coupled projection's rows and columns (ϑ_q of the pre term Tx, of the
         end T1, the end point q1, the midpoint M where ϑ_q is taken there), the Lobatto rows."""
-        sysm, tab, sig, rec = self.system, self.tableau, self.sigma, self.record
+        sysm, tab, sig, al, rec = self.system, self.tableau, self.sigma, self.alpha, self.record
         s, d, m = self.s, self.d, z.shape[0]
         sd = s * d
         iL = sd if self.coupled else None
@@ -451,21 +451,21 @@ class Stepper:
             for j in range(s):
                 B = blocks[i][j]
                 if Sx is not None:
-                    B = B - (0.5 * tab.b[j]) * Sx
+                    B = B - (0.5 * tab.b[j] * al) * Sx
                 J[:, i * d:(i + 1) * d, j * d:(j + 1) * d] = B
         if self.coupled:
             TxT = np.swapaxes(Tx, -1, -2)
-            dpb_dL = TxT if Sx is None else TxT + Sx
+            dpb_dL = al * TxT if Sx is None else al * TxT + (al * al) * Sx     # ∂p̃/∂Λ, p̃ = p̄ + α ϑ_q(x)ᵀΛ
             shift = stage_jacobian_shift(tab, st)
             for i in range(s):
-                J[:, i * d:(i + 1) * d, iL:iL + d] = shift[i] - dpb_dL
+                J[:, i * d:(i + 1) * d, iL:iL + d] = al * shift[i] - dpb_dL
             if rec.post_at == "end":
                 S1 = contract_first(sysm.ddtheta(q1), L)
-                dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (1.0 + sig) * S1
+                dp1_dL = dpb_dL + sig * np.swapaxes(T1, -1, -2) + sig * (al + sig) * S1
                 extra_Y = sig * S1
-            else:
-                dp1_dL = (1.0 + sig) * dpb_dL
-                extra_Y = (0.5 * (1.0 + sig)) * Sx
+            else:                                # ϑ_q of the post term at the midpoint too
+                dp1_dL = dpb_dL + sig * TxT + (sig * al) * Sx
+                extra_Y = (0.5 * (al + sig)) * Sx
             ThetaT = np.swapaxes(st.Theta, -1, -2)
             KS = weigh(tab.b, np.zeros_like(tab.b), st.K)
             rows = slice(iL, iL + d)
@@ -475,7 +475,7 @@ class Stepper:
                     KB = KB + tab.b[l] * tab.a[l, j] * st.K[:, l]
                 dp1 = KB + tab.b[j] * ThetaT[:, j] + tab.b[j] * extra_Y
                 J[:, rows, j * d:(j + 1) * d] = dp1 - tab.b[j] * T1
-            J[:, rows, iL:iL + d] = dp1_dL + KS - (1.0 + sig) * T1
+            J[:, rows, iL:iL + d] = dp1_dL + al * KS - (al + sig) * T1
         if self.lobatto:
             for i in range(s):
                 J[:, i * d:(i + 1) * d, iM:iM + d] = (tab.d[i] / tab.b[i]) * np.eye(d)
@@ -540,7 +540,7 @@ class Stepper:
             ok &= ok1
             out.iterations = its + its1
             out.p = ex1["p"]
-            out.inc_q = (sumbY + sig * L1) if rec.pre == "none" else ((Lam + sumbY) + sig * L1)
+            out.inc_q = (sumbY + sig * L1) if rec.pre == "none" else ((self.alpha * Lam + sumbY) + sig * L1)
             out.inc_p, out.Lam = None, L1
         if self.accept_unconverged:
             finite = np.all(np.isfinite(z), axis=1)

@@ -155,10 +155,11 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
     qbe, e0 = at(w, S.qbe), at(w, S.eQ)
     for m in range(d):
         if coupled:
-            q0m = ld(qbar, m) + ld(Lz, m)
+            aL = plan.alpha * ld(Lz, m)
+            q0m = ld(qbar, m) + aL
             st(q0, m, q0m)
             if exact:
-                st(e0, m, ld(qbe, m) + rounding(ld(qbar, m), ld(Lz, m), q0m))
+                st(e0, m, ld(qbe, m) + rounding(ld(qbar, m), aL, q0m))
         else:
             st(q0, m, ld(qbar, m))
             if exact:
@@ -173,9 +174,10 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             px = MIDPOINT
         _tapply(at(pT, px * dd), Lz, pb, d)
         for m in range(d):
-            pbm = ld(pbar, m) + ld(pb, m)
+            aT = plan.alpha * ld(pb, m)
+            pbm = ld(pbar, m) + aT
             if exact:
-                st(pwe, m, ld(w, S.pbe + m) + rounding(ld(pbar, m), ld(pb, m), pbm))
+                st(pwe, m, ld(w, S.pbe + m) + rounding(ld(pbar, m), aT, pbm))
             st(pb, m, pbm)
     else:
         for m in range(d):
@@ -248,7 +250,7 @@ def _stage_jacobian(J, nz, c, plan, d, s, w, S):
                         if cc != 0.0:
                             B = B - cc * ld(K, l * dd + m * d + n)
                     if mid:
-                        B = B - (0.5 * c.b[j]) * ld(Sx, m * d + n)
+                        B = B - (0.5 * c.b[j] * plan.alpha) * ld(Sx, m * d + n)
                     st(J, (i * d + m) * nz + j * d + n, B)
 
 
@@ -261,37 +263,37 @@ def _projection_jacobian(J, nz, px, c, plan, d, s, w, S):
     iL = sd
     T, K, pT = at(w, S.T), at(w, S.K), at(w, S.pT)
     Sx, S1 = at(w, S.S), at(w, S.S + dd)
-    sig = plan.sigma
+    sig, al = plan.sigma, plan.alpha
     Tx = at(pT, px * dd)
     T1 = at(pT, END * dd)
     Tp = T1 if plan.post_at == END else Tx
     spost = S1 if plan.post_at == END else Sx
-    upost = (1.0 + sig) if plan.post_at == END else 1.0      # ∂x_post/∂Λ
+    upost = (al + sig) if plan.post_at == END else al        # ∂x_post/∂Λ
     cpost = 1.0 if plan.post_at == END else 0.5              # ∂x_post/∂Y_j = cpost b_j
     mid = plan.pre_at == MIDPOINT
     for m in range(d):
         for n in range(d):
-            dpb = ld(Tx, n * d + m)                          # ∂p̃/∂Λ = ϑ_q(x_pre)ᵀ (+ S_x at the midpoint)
+            dpb = al * ld(Tx, n * d + m)                     # ∂p̃/∂Λ = α ϑ_q(x_pre)ᵀ (+ α² S_x at the midpoint)
             if mid:
-                dpb = dpb + ld(Sx, m * d + n)
+                dpb = dpb + (al * al) * ld(Sx, m * d + n)
             for i in range(s):
                 B = ld(T, i * dd + m * d + n)
                 for l in range(s):
                     if c.abar[i * s + l] != 0.0:
                         B = B - c.abar[i * s + l] * ld(K, l * dd + m * d + n)
-                st(J, (i * d + m) * nz + iL + n, B - dpb)
+                st(J, (i * d + m) * nz + iL + n, al * B - dpb)
             KS = c.b[0] * ld(K, m * d + n)
             for l in range(1, s):
                 KS = KS + c.b[l] * ld(K, l * dd + m * d + n)
-            st(J, (iL + m) * nz + iL + n, (dpb + sig * ld(Tp, n * d + m) + (sig * upost) * ld(spost, m * d + n)) + KS
-               - (1.0 + sig) * ld(T1, m * d + n))
+            st(J, (iL + m) * nz + iL + n, (dpb + sig * ld(Tp, n * d + m) + (sig * upost) * ld(spost, m * d + n)) + al * KS
+               - (al + sig) * ld(T1, m * d + n))
             for j in range(s):
                 KB = c.b[0] * c.a[j] * ld(K, m * d + n)
                 for l in range(1, s):
                     KB = KB + c.b[l] * c.a[l * s + j] * ld(K, l * dd + m * d + n)
                 ey = sig * cpost * ld(spost, m * d + n)
                 if mid:
-                    ey = ey + 0.5 * ld(Sx, m * d + n)
+                    ey = ey + (0.5 * al) * ld(Sx, m * d + n)
                 st(J, (iL + m) * nz + j * d + n, KB + c.b[j] * ld(T, j * dd + n * d + m) + c.b[j] * ey
                    - c.b[j] * ld(T1, m * d + n))
 
@@ -341,10 +343,11 @@ def _prepare(ev, k, plan, d, w, S):
         _eval(ev, k, q, False, w, S, START, d)
     for m in range(d):
         if plan.pre == PRE_PREVIOUS:
-            qb = ld(q, m) + ld(lam, m)
+            aL = plan.alpha * ld(lam, m)
+            qb = ld(q, m) + aL
             st(qbar, m, qb)
             if exact:
-                st(qbe, m, rounding(ld(q, m), ld(lam, m), qb))
+                st(qbe, m, rounding(ld(q, m), aL, qb))
         else:
             st(qbar, m, ld(q, m))
             if exact:
@@ -357,7 +360,8 @@ def _prepare(ev, k, plan, d, w, S):
     if plan.pre == PRE_PREVIOUS:
         _tapply(pT, lam, tl, d)
         for m in range(d):
-            pb = ld(pbar, m) + ld(tl, m)
+            aT = plan.alpha * ld(tl, m)
+            pb = ld(pbar, m) + aT
             if exact:
-                st(pbe, m, rounding(ld(pbar, m), ld(tl, m), pb))
+                st(pbe, m, rounding(ld(pbar, m), aT, pb))
             st(pbar, m, pb)

@@ -46,11 +46,12 @@ def lane_width(nz, n=WIDE_POINTS):
 
 # -- the projection as the kernel reads it ------------------------------------------------------
 
-Plan = namedtuple("Plan", "pre pre_at post post_at sigma lobatto")
+Plan = namedtuple("Plan", "pre pre_at post post_at sigma alpha lobatto")
 Plan.__doc__ = """A projection as the kernel reads it (made from Projection.codes): ``pre`` one of PRE_*,
 ``pre_at``/``post_at`` where ϑ_q of the pre/post terms is taken (START, MIDPOINT, END), ``post``
-whether the step ends on the constraint, ``sigma`` the post term's weight, ``lobatto`` whether the
-tableau has the Lobatto constraint μ (eq:vprk_lobatto)."""
+whether the step ends on the constraint, ``sigma`` the post term's weight σ and ``alpha`` the pre
+term's α (q̃ = q̄ + αΛ, p̃ = p̄ + α ϑ_q(x_pre)ᵀΛ; the paper's rows: α = 1, σ = 1 or R(∞)), ``lobatto``
+whether the tableau has the Lobatto constraint μ (eq:vprk_lobatto)."""
 
 # -- the tableau's flat layout, made and read here only ----------------------------------------
 

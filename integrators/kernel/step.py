@@ -57,12 +57,13 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
     if coupled:                                 # Ψ_h and Λ solved together
         for m in range(d):
             Lm = ld(zev, iL + m)
-            a = Lm + ld(sY, m)
+            aL = plan.alpha * Lm
+            a = aL + ld(sY, m)
             b = plan.sigma * Lm
             im = a + b
             st(inc, m, im)
             if exact_points(Lm):
-                st(w, S.ince + m, (ld(w, S.sYe + m) + rounding(Lm, ld(sY, m), a)) + rounding(a, b, im))
+                st(w, S.ince + m, (ld(w, S.sYe + m) + rounding(aL, ld(sY, m), a)) + rounding(a, b, im))
             st(pn, m, ld(p1, m))
             st(ln, m, Lm)
     elif plan.post:                             # Ψ_h, then the projection
@@ -86,12 +87,13 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
         ok = mand(ok, ld(f, F.ok) != 0.0)
         its = its + ld(f, F.its)
         for m in range(d):
-            shift = ld(lam, m) + ld(sYs, m) if plan.pre == PRE_PREVIOUS else ld(sYs, m)
+            aL = plan.alpha * ld(lam, m)
+            shift = aL + ld(sYs, m) if plan.pre == PRE_PREVIOUS else ld(sYs, m)
             b = plan.sigma * ld(pzev, m)
             im = shift + b
             st(inc, m, im)
             if exact:
-                e = rounding(ld(lam, m), ld(sYs, m), shift) if plan.pre == PRE_PREVIOUS else 0.0 * shift
+                e = rounding(aL, ld(sYs, m), shift) if plan.pre == PRE_PREVIOUS else 0.0 * shift
                 st(w, S.ince + m, (ld(w, S.sYe + m) + e) + rounding(shift, b, im))
             st(pn, m, ld(p1, m))
             st(ln, m, ld(pzev, m))
