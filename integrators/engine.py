@@ -449,7 +449,7 @@ class Engine:
         lob = tableau.d is not None
         self.plan = kernel.Plan(*rec.codes(tableau), lob)
         self.post = kernel.PAPER if rec.post_term is None else rec.post_term
-        self.nz = (s + (1 if rec.coupled else 0) + (1 if lob else 0)) * d
+        self.nz = kernel.unknowns_of(s, d, rec.coupled, lob).nz
         self.k = system.param_vector()
         self.tolerances = tolerances if tolerances is not None else Tolerances()
         if not isinstance(self.tolerances, Tolerances):
@@ -483,6 +483,14 @@ class Engine:
         st = self.state(np.repeat(q[:1], W, axis=0))
         st.live[:] = False
         self.advance(st, 1, 1, lanes=W)
+
+    def pair(self, newton=None):
+        """What every step of this pair reads, as the kernel takes it (:class:`integrators.kernel.Pair`):
+        the parameter values, the flat tableau, the projection's plan, h and Newton's rule (``newton``:
+        the array of a :class:`integrators.kernel.Newton` record; None: this engine's for doubles).
+        The one place the kernel's pair data is made."""
+        from .kernel import Pair
+        return Pair(self.k, self.tab, tuple(self.plan), self.h, self._cfg if newton is None else newton)
 
     def _layout(self):
         """kernel.layout of this pair as the three int64 arrays the kernel takes."""
@@ -553,9 +561,10 @@ class Engine:
         shape = (K,) + state.q.shape
         snap = (np.empty(shape, state.q.dtype), np.empty(shape, state.q.dtype), np.empty(shape, state.q.dtype),
                 np.zeros((K, state.q.shape[0]), np.uint8))
-        kernel.advance(spec.ev, spec.inside, self.post, self.k, self.tab, tuple(self.plan), self.h, float(t0), int(first),
-                       int(nsteps), int(block), arrays, (0,) * self.system.d, spec.newton, spec.proto,
-                       self._layout(), rounds, snap, int(every) if K > 0 else 0)
+        kernel.advance(spec.ev, spec.inside, self.post, self.pair(spec.newton),
+                       kernel.Span(float(t0), int(first), int(nsteps)), arrays,
+                       kernel.Shape((0,) * self.system.d, spec.proto, self._layout(), int(block)),
+                       kernel.Outputs(rounds, snap, int(every) if K > 0 else 0))
         use = LaneUse(spec.lanes, *(int(x) for x in rounds.sum(axis=0)))
         return (use, snap) if every else use
 
@@ -600,8 +609,8 @@ class Engine:
                 point_functions(self.system, cplx)
             self._functions[key] = ev, inside, 1
         ev = self._functions[key][0]
-        kernel.refactor(ev, self.k, self.tab, tuple(self.plan), self.h, arrays, int(self.nz), (0,) * self.system.d,
-                        (0.0,) if double_double else (0,), self._layout())
+        kernel.refactor(ev, self.pair(), arrays,
+                        kernel.Shape((0,) * self.system.d, (0.0,) if double_double else (0,), self._layout(), 1))
         state.needs_factors = False
 
     @staticmethod

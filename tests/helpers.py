@@ -256,10 +256,11 @@ def assert_jacobian_is_complex_steps(system, eng, h, q, p, lam, z, tol=1e-12):
     from integrators.codegen import point_functions
     ev_r, _ = point_functions(system)
     ev_c, _ = point_functions(system, complex_step=True)
-    _, J = kernel.probe(ev_r, eng.k, eng.tab, eng.plan, h, q, p, lam, z, True, s=eng.tableau.s)
+    assert h == eng.h
+    _, J = kernel.probe(ev_r, eng.pair(), (q, p, lam), z, True, s=eng.tableau.s)
     for k in range(eng.nz):
         zc = z.astype(complex)
         zc[k] += 1e-30j
-        col = kernel.probe(ev_c, eng.k, eng.tab, eng.plan, h, q.astype(complex), p.astype(complex),
-                           lam.astype(complex), zc, False, s=eng.tableau.s)[0].imag / 1e-30
+        col = kernel.probe(ev_c, eng.pair(), (q.astype(complex), p.astype(complex), lam.astype(complex)), zc, False,
+                           s=eng.tableau.s)[0].imag / 1e-30
         assert np.max(np.abs(J[:, k] - col)) <= tol * max(1.0, np.max(np.abs(col))), k

@@ -168,3 +168,26 @@ def test_pages_and_docstrings_state_today():
              for p in [*(ROOT / folder).rglob("*.py"), *(ROOT / folder).rglob("*.toml")]
              for m in re.findall(r"[Ii]ssue[ _]\d+|ISSUE_\d+", p.read_text())]
     assert cited == []
+
+
+def test_no_function_of_the_kernel_takes_more_than_ten_arguments():
+    """What crosses into the kernel travels as named records (integrators.kernel.records: Pair, Span,
+    Shape, Outputs, Step, Group), not as long positional lists: no function of integrators/kernel/
+    and no method of the engine's classes takes more than 10 arguments (self not counted); and the
+    kernel is one module per role, none over 800 lines."""
+    import ast
+    over = []
+    files = sorted((ROOT / "integrators" / "kernel").glob("*.py"))
+    for path in files + [ROOT / "integrators" / "engine.py"]:
+        tree = ast.parse(path.read_text())
+        scopes = tree.body if path.parent.name == "kernel" else \
+            [n for c in tree.body if isinstance(c, ast.ClassDef) for n in c.body]
+        for fn in scopes:
+            if isinstance(fn, ast.FunctionDef):
+                a = fn.args
+                n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg) + bool(a.kwarg)
+                n -= bool(a.args) and a.args[0].arg in ("self", "cls")
+                if n > 10:
+                    over.append(f"{path.relative_to(ROOT)}: {fn.name} ({n})")
+    assert len(files) >= 8 and over == []
+    assert max(len(p.read_text().splitlines()) for p in files) <= 800        # one module per role

@@ -24,13 +24,13 @@ def test_jacobian_matches_complex_step(sysname, h, tab, proj, rng):
     Lam = 1e-3 * rng.standard_normal(sy.d)
     z = 1e-2 * rng.standard_normal(eng.nz)
     z[: eng.tableau.s * sy.d] += np.tile(h * sy.vector_field(q), eng.tableau.s)
-    _, J = kernel.probe(ev_r, eng.k, eng.tab, eng.plan, h, q, p, Lam, z, True, s=eng.tableau.s)
+    _, J = kernel.probe(ev_r, eng.pair(), (q, p, Lam), z, True, s=eng.tableau.s)
     eps = 1e-30
     qc, pc, lc = (x.astype(complex) for x in (q, p, Lam))
     for k in range(eng.nz):
         zc = z.astype(complex)
         zc[k] += 1j * eps
-        col = kernel.probe(ev_c, eng.k, eng.tab, eng.plan, h, qc, pc, lc, zc, False, s=eng.tableau.s)[0].imag / eps
+        col = kernel.probe(ev_c, eng.pair(), (qc, pc, lc), zc, False, s=eng.tableau.s)[0].imag / eps
         assert np.max(np.abs(J[:, k] - col)) <= 1e-12 * max(1.0, np.max(np.abs(col))), k
 
 

@@ -24,7 +24,8 @@ bits are those of the scalar path whatever W, whichever points share its lanes, 
 or rank count (tests/test_lanes.py).  No fastmath, no fused multiply–add.
 
 The unknowns of a step are z = [Y_1 … Y_s, Λ (coupled projections), μ (Lobatto)] with
-Y_i = h V_i the stage displacements and Λ = hλ (see integrators/projections.py).  Newton uses the
+Y_i = h V_i the stage displacements and Λ = hλ (see integrators/projections.py); where each part
+starts is :class:`Unknowns`, made in one place (``records.unknowns``, ``unknowns_of``).  Newton uses the
 exact Jacobian, factorised by a small dense LU with partial pivoting and kept across iterations and
 steps while it contracts.  The state records where each point's factors were taken (the iterate z,
 and q_n and Λ_n of that step): :func:`refactor` rebuilds the same factors from it, so a run resumed
@@ -47,14 +48,16 @@ from __future__ import annotations
 
 from ..projections import END, MIDPOINT, PRE_NONE, PRE_PREVIOUS, PRE_UNKNOWN, START
 from .blocks import advance, advance_argument, probe, refactor, scalars_dd_points, theta_dd_points
-from .equations import exact_points
-from .linalg import _weighted_sum
+from .equations import evaluate, exact_points
+from .linalg import _weighted_sum, apply, contract, rounding, transpose_apply
 from .predictor import _guess, _recurrence
 from .projection import PAPER, post_term, project
-from .records import (AR, COMPLEX_STEP, DEPTH, LANES, RECURRENCE, WIDE, WIDE_NZ, WIDE_POINTS, Coefficients, Newton, Plan,
-                      StateArrays, flat_tableau, lane_width, layout)
+from .records import (AR, COMPLEX_STEP, DEPTH, LANES, ORDERS, RECURRENCE, ROUNDS, WIDE, WIDE_NZ, WIDE_POINTS, Coefficients,
+                      Newton, Outputs, Pair, Plan, Shape, Span, StateArrays, Unknowns, flat_tableau, lane_width, layout,
+                      unknowns_of)
 
 __all__ = ["END", "MIDPOINT", "PRE_NONE", "PRE_PREVIOUS", "PRE_UNKNOWN", "START", "advance", "advance_argument", "probe",
            "refactor", "scalars_dd_points", "theta_dd_points", "exact_points", "_weighted_sum", "_guess", "_recurrence",
            "PAPER", "post_term", "project", "AR", "COMPLEX_STEP", "DEPTH", "LANES", "RECURRENCE", "WIDE", "WIDE_NZ",
-           "WIDE_POINTS", "Coefficients", "Newton", "Plan", "StateArrays", "flat_tableau", "lane_width", "layout"]
+           "WIDE_POINTS", "Coefficients", "Newton", "Plan", "StateArrays", "flat_tableau", "lane_width", "layout", "ORDERS",
+           "ROUNDS", "Outputs", "Pair", "Shape", "Span", "Unknowns", "unknowns_of", "evaluate", "apply", "contract", "rounding", "transpose_apply"]

@@ -9,9 +9,11 @@ import numpy as np
 from numba import njit, prange
 
 from ..simd import _at, anyl, at, elem, elem3, ld, lget, lanes, lmask, lset, mand, mor, plain, put, put3, sel, st
-from .records import DEPTH, Group, layout, _newton_rule, _OPTS, Plan, _records, StateArrays, Step
+from .records import DEPTH, ORDERS, ROUNDS, Group, layout, _newton_rule, _OPTS, Outputs, Pair, Plan, _records, Shape, Span, \
+    StateArrays, Step
 from .linalg import lu_factor
 from .equations import _main, _prepare
+from .projection import PAPER
 from .step import _step
 
 
@@ -42,12 +44,12 @@ def _gather(st_, pt, l, valid, d, s, nz, g):
     for i in range(DEPTH * (s + 2)):
         for m in range(d):
             lset(w, S.D + i * d + m, l, elem3(st_.defects, pt, i, m))
-    pr_ = st_.orders
-    lset(f, F.depth, l, float(pr_[pt, 0]))
-    lset(f, F.ordy, l, float(pr_[pt, 1]))
-    lset(f, F.ordl, l, float(pr_[pt, 2]))
-    lset(f, F.trust, l, float(pr_[pt, 3]))
-    lset(f, F.age, l, float(pr_[pt, 4]))
+    pr_, O = st_.orders, ORDERS
+    lset(f, F.depth, l, float(pr_[pt, O.depth]))
+    lset(f, F.ordy, l, float(pr_[pt, O.ordy]))
+    lset(f, F.ordl, l, float(pr_[pt, O.ordl]))
+    lset(f, F.trust, l, float(pr_[pt, O.trust]))
+    lset(f, F.age, l, float(pr_[pt, O.age]))
     known = have[pt] != 0 and valid           # factors kept from the last step
     for i in range(nz):
         for j in range(nz):
@@ -93,11 +95,12 @@ def _scatter(st_, pt, l, d, s, nz, g):
         for m in range(d):
             put3(st_.defects, pt, i, m, lget(w, S.D + i * d + m, l))
     pr_ = st_.orders
-    pr_[pt, 0] = int(lget(f, F.depth, l))
-    pr_[pt, 1] = int(lget(f, F.ordy, l))
-    pr_[pt, 2] = int(lget(f, F.ordl, l))
-    pr_[pt, 3] = int(lget(f, F.trust, l))
-    pr_[pt, 4] = int(lget(f, F.age, l))
+    O = ORDERS
+    pr_[pt, O.depth] = int(lget(f, F.depth, l))
+    pr_[pt, O.ordy] = int(lget(f, F.ordy, l))
+    pr_[pt, O.ordl] = int(lget(f, F.ordl, l))
+    pr_[pt, O.trust] = int(lget(f, F.trust, l))
+    pr_[pt, O.age] = int(lget(f, F.age, l))
     for i in range(nz):
         for j in range(nz):
             put3(lu, pt, i, j, lget(w, S.lu + i * nz + j, l))
@@ -139,11 +142,16 @@ def _record(snap, every, first, l, d, g):
 
 
 @njit(**_OPTS)
-def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0, first, nsteps, st_, d, s, nz, cfg,
-           proto, lay, snap, every):
+def _block(scratch, span, ev, inside, post, pair, steps, st_, sizes, out):
     """The live points among order[lo … hi − 1] through ``nsteps`` steps each, W (= len(proto))
     lanes at a time, with the thread's scratch arrays; returns the group steps taken, the Newton
-    iterations they ran and the Jacobians they took.
+    iterations they ran and the Jacobians they took (the columns :data:`ROUNDS`).
+
+    Plain tuples, as :func:`advance`'s parallel loop makes them (it takes no named tuples):
+    ``scratch`` = (WS, FS, IS, QR), the thread's value, flag and integer buffers and one lane's q for
+    the domain test; ``span`` = (order, lo, hi); ``pair`` = (k, tab, plan, h, newton) as pointers and
+    the plan's tuple (the :class:`Pair` record's fields); ``steps`` = (t0, first, nsteps) (:class:`Span`);
+    ``st_`` the :class:`StateArrays`; ``sizes`` = (d, s, nz, proto, lay); ``out`` = (snap, every).
 
     **Lanes are refilled.**  Each lane holds one point and counts its steps (``F.jn``); after every
     step, a lane whose point has taken its ``nsteps`` steps or has broken down hands the point back
@@ -159,6 +167,12 @@ def _block(WS, FS, IS, QR, order, lo, hi, ev, inside, post, kp, h, tb, plan, t0,
     call, while numba would free a local array after its last use as an array, i.e. while the raw
     pointers taken from it are still in use.
     """
+    WS, FS, IS, QR = scratch
+    order, lo, hi = span
+    kp, tb, plan, h, cfg = pair
+    t0, first, nsteps = steps
+    d, s, nz, proto, lay = sizes
+    snap, every = out
     # the records by name, made here (numba's parallel loop takes no named tuples)
     S, F, IP = _records(lay)
     st_ = StateArrays(*st_)
@@ -220,10 +234,11 @@ def _aligned(raw, n):
 
 
 @njit(parallel=True, **_OPTS)
-def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, dim, tolerances, proto, lay, rounds,
-            snap, every):
-    """Advance every live point of the state tuple ``st_`` by ``nsteps`` steps, the step numbered
-    ``first`` aiming at t0 + first·h.  The live points, in their order, are taken ``block`` at a
+def advance(ev, inside, post, pair, span, st_, shape, outputs):
+    """Advance every live point of the state tuple ``st_`` by ``span.nsteps`` steps, the step numbered
+    ``span.first`` aiming at t0 + first·h (:class:`Span`), with the pair's data ``pair`` (:class:`Pair`),
+    laid out as ``shape`` says (:class:`Shape`), writing ``outputs`` (:class:`Outputs`).  The live
+    points, in their order, are taken ``block`` at a
     time (dead points are left out before blocks are made, so every block but the last is full),
     blocks spread over the threads, and W = len(proto) at a time within a block (``ev`` must be the
     W-lane point function); a point's steps never depend on its block, its lanes, its thread or its
@@ -231,32 +246,37 @@ def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, di
     projections solved after Ψ_h); a projection's own compiled function compiles (and does not
     cache) a kernel of its own.
 
-    ``st_``: the :class:`StateArrays` as a plain tuple; ``tolerances``: the float64 array of a
-    :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``lay``: :func:`layout` as
-    three int64 arrays (Engine._layout); ``rounds`` (int64, a row per block): the steps, the
+    ``st_``: the :class:`StateArrays` as a plain tuple; ``pair.newton``: the float64 array of a
+    :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``shape.lay``: :func:`layout` as
+    three int64 arrays (Engine._layout); ``outputs.rounds`` (int64, a row per block): the steps, the
     Newton iterations and the Jacobians (evaluated and factorised, the projection's solve's
     included) each block's group of lanes ran (:func:`_block`), so point-steps / (W · Σ steps) is
     the share of lane steps that did work, and the points' iterations / (W · Σ iterations) that of
     lane iterations.
 
-    ``snap`` = (q, p, Λ, mark), K outputs of every point, and ``every`` (0: none): after a point's
+    ``outputs.snap`` = (q, p, Λ, mark), K outputs of every point, and ``every`` (0: none): after a point's
     step numbered a multiple of ``every`` (the k-th such step after ``first`` − 1, k < K), its q, p,
     Λ go to row k and mark[k, point] = 1; a point that is not live after that step is not recorded
     (:meth:`integrators.engine.Engine.advance_outputs` fills those from its frozen state).  A point
     keeps its lane for the whole call, so a run's outputs cost no trip of its Newton factors and
     predictor table through memory (docs/benchmarks.md, "What a call costs").
     """
+    k, tab, plan, h, tolerances = pair.k, pair.tab, pair.plan, pair.h, pair.newton
+    t0, first, nsteps = span.t0, span.first, span.nsteps
+    proto, lay, block = shape.proto, shape.lay, shape.block
+    rounds, snap, every = outputs.rounds, outputs.snap, outputs.every
     arrays = StateArrays(*st_)
     q, Y, lu = arrays.q, arrays.Y, arrays.lu
     n = q.shape[0]
-    d = len(dim)           # ``dim`` is a tuple of d zeros: d is a compile-time constant, one compilation
+    d = len(shape.dim)     # ``dim`` is a tuple of d zeros: d is a compile-time constant, one compilation
     #                        per dimension, and the compiler unrolls the loops over coordinates
     s = Y.shape[1]
     nz = lu.shape[1]
     W = len(proto)
     S, F, IP = _records(lay)
     nw, nf, ni = S.size * W, F.size * W, IP.size * W
-    kp, tb, cfg = _at(k, 0), _at(tab, 0), _at(tolerances, 0)
+    kp, tb = _at(k, 0), _at(tab, 0)
+    R = ROUNDS
     live = arrays.live
     order = np.empty(n, np.int64)               # the live points, in order
     m = 0
@@ -270,16 +290,23 @@ def advance(ev, inside, post, k, tab, plan, h, t0, first, nsteps, block, st_, di
         FS = _aligned(np.zeros(nf + 16), nf)                                            # (n, d, 2): two doubles
         IS = _aligned(np.zeros(ni + 16, np.int64), ni)                                  # a value)
         QR = np.zeros(d)
-        rounds[bi, 0], rounds[bi, 1], rounds[bi, 2] = _block(
-            WS, FS, IS, QR, order, bi * block, min(m, (bi + 1) * block), ev, inside, post, kp, h, tb, plan, t0, first,
-            nsteps, st_, d, s, nz, cfg, proto, lay, snap, every)
+        rounds[bi, R.steps], rounds[bi, R.iterations], rounds[bi, R.jacobians] = _block(
+            (WS, FS, IS, QR), (order, bi * block, min(m, (bi + 1) * block)), ev, inside, post,
+            (kp, tb, plan, h, tolerances), (t0, first, nsteps), st_, (d, s, nz, proto, lay), (snap, every))
 
 
 def advance_argument(sig, name):
     """The numba type of :func:`advance`'s argument ``name`` in its compiled signature ``sig`` (one of
-    ``advance.signatures``): which specialisations exist, read by name."""
+    ``advance.signatures``), or of the field ``name`` of one of its records (``dim``, ``proto``: of
+    :class:`Shape`): which specialisations exist, read by name."""
     import inspect
-    return sig[list(inspect.signature(advance.py_func).parameters).index(name)]
+    params = list(inspect.signature(advance.py_func).parameters)
+    if name in params:
+        return sig[params.index(name)]
+    for record, arg in ((Pair, "pair"), (Span, "span"), (Shape, "shape"), (Outputs, "outputs")):
+        if name in record._fields:
+            return sig[params.index(arg)][record._fields.index(name)]
+    raise KeyError(f"advance has no argument or record field {name!r}")
 
 
 @njit(**_OPTS)
@@ -304,20 +331,24 @@ def scalars_dd_points(sc, k, q2, out):
 
 
 @njit(**_OPTS)
-def refactor(ev, k, tab, plan, h, st_, nz, dim, proto, lay):
+def refactor(ev, pair, st_, shape):
     """Rebuild the Newton factors ``lu, piv`` of every point that has them (``have_lu``) from where
     they were taken (``jac_z``, ``jac_q``, ``jac_lam``): the step's equations' Jacobian at that
     iterate, factorised, as :func:`_newton` did (one lane: W = 1, ``ev`` the scalar point function;
     a lane's factors are the scalar path's bits).  What a state read from a checkpoint needs before
     it is advanced, so that the resumed run is bitwise the run it continues.  (One thread: once per
-    resume, one Jacobian a point.)"""
+    resume, one Jacobian a point.)  ``pair``: :class:`Pair`; ``shape``: :class:`Shape` (its dim, proto
+    and lay)."""
     arrays = StateArrays(*st_)
     n = arrays.q.shape[0]
-    d = len(dim)
+    d = len(shape.dim)
     s = arrays.Y.shape[1]
-    S, F, IP = _records(lay)
-    kp, tb = _at(k, 0), _at(tab, 0)
-    pl = Plan(*plan)
+    nz = arrays.lu.shape[1]
+    proto = shape.proto
+    S, F, IP = _records(shape.lay)
+    kp = _at(pair.k, 0)
+    pl = Plan(*pair.plan)
+    P = Step(PAPER, kp, pair.h, _at(pair.tab, 0), pl, _newton_rule(pair.newton))
     have, lu, piv = arrays.have_lu, arrays.lu, arrays.piv
     WS = np.zeros(S.size * (arrays.q.ndim - 1), arrays.q.dtype)
     IS = np.zeros(IP.size, np.int64)
@@ -332,7 +363,7 @@ def refactor(ev, k, tab, plan, h, st_, nz, dim, proto, lay):
             lset(w, S.z + i, 0, elem3(arrays.jac_z, pt, i // d, i % d))
         _prepare(ev, kp, pl, d, w, S)
         LU, pv = at(w, S.lu), at(ip, IP.piv)
-        _main(at(w, S.z), True, at(w, S.r), LU, ev, kp, h, tb, pl, d, s, w, S)
+        _main(at(w, S.z), True, at(w, S.r), LU, ev, P, d, s, w, S)
         lu_factor(LU, pv, nz)
         for i in range(nz):
             for j in range(nz):
@@ -341,27 +372,30 @@ def refactor(ev, k, tab, plan, h, st_, nz, dim, proto, lay):
 
 
 @njit(**_OPTS)
-def _probe(WS, zz, r, J, ev, k, tab, plan, h, q, p, lam, jac, s, S):
+def _probe(WS, unknowns, ev, pair, point, jac, s, S):
+    zz, r, J = unknowns
+    q, p, lam = point
     d = q.shape[0]
     w = lanes(WS, 0, (0,))
     for m in range(d):
         st(w, S.q + m, q[m])
         st(w, S.p + m, p[m])
         st(w, S.lam + m, lam[m])
-    _prepare(ev, _at(k, 0), plan, d, w, S)
-    _main(_at(zz, 0), jac, _at(r, 0), _at(J, 0), ev, _at(k, 0), h, _at(tab, 0), plan, d, s, w, S)
+    P = Step(PAPER, _at(pair.k, 0), pair.h, _at(pair.tab, 0), Plan(*pair.plan), _newton_rule(pair.newton))
+    _prepare(ev, P.k, P.plan, d, w, S)
+    _main(_at(zz, 0), jac, _at(r, 0), _at(J, 0), ev, P, d, s, w, S)
 
 
-def probe(ev, k, tab, plan, h, q, p, lam, z, jac, *, s):
-    """The step's residual at z (and its Jacobian when ``jac``) for one point (q, p, Λ) of a pair with
-    ``s`` stages (``tab`` its :func:`flat_tableau`): the equations Newton solves, for tests (the
-    Jacobian against complex-step differences of the residual)."""
+def probe(ev, pair, point, z, jac, *, s):
+    """The step's residual at z (and its Jacobian when ``jac``) for one point ``point`` = (q, p, Λ) of
+    a pair with ``s`` stages and data ``pair`` (:class:`Pair`, Engine.pair()): the equations Newton
+    solves, for tests (the Jacobian against complex-step differences of the residual)."""
+    q = point[0]
     d = q.shape[0]
     nz = z.shape[0]
     S, F, _ = layout(s, d, nz)
     WS = np.zeros(S.size, z.dtype)
     r = np.zeros(nz, z.dtype)
     J = np.zeros(nz * nz, z.dtype)
-    zz = z.copy()
-    _probe(WS, zz, r, J, ev, k, tab, Plan(*plan), h, q, p, lam, jac, s, S)
+    _probe(WS, (z.copy(), r, J), ev, pair, tuple(point), jac, s, S)
     return r, J.reshape((nz, nz))

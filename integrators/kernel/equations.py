@@ -10,8 +10,8 @@ from numba.extending import overload
 from ..ddouble import DDType, dd
 from ..projections import END, MIDPOINT, PRE_PREVIOUS, PRE_UNKNOWN, START
 from ..simd import DDVec, Vec, at, ld, raw, st
-from .records import _coefficients, _OPTS
-from .linalg import _apply, _contract, rounding, _tapply, _weighted_sum
+from .records import _coefficients, _OPTS, unknowns
+from .linalg import apply, contract, rounding, transpose_apply, _weighted_sum
 
 
 def lobatto_d(c, i, like):
@@ -52,8 +52,12 @@ def _exact_points(like):
 
 
 @njit(inline='always', **_OPTS)
-def _eval(ev, k, x, need, w, S, slot, d):
-    """ϑ and its derivatives at x into point slot ``slot`` (START, MIDPOINT or END)."""
+def evaluate(ev, k, x, need, w, S, slot, d):
+    """ϑ and its derivatives at the point x (d values) into the point slot ``slot`` (START, MIDPOINT or
+    END) of the scratch ``w``: ϑ at ``S.pth + slot·d``, ϑ_q at ``S.pT + slot·d²`` (row-major,
+    [k, i] = ∂ϑ_k/∂q_i), ∇H at ``S.pdH + slot·d`` and, when ``need``, ϑ_qq at ``S.pTT + slot·d³`` and
+    ∇²H at ``S.pHH + slot·d²``.  Part of the post-term contract (:func:`project`): a post term reads
+    them with :func:`integrators.simd.at`/``ld``; any lane width."""
     dd = d * d
     ev(raw(x), k, need, raw(at(w, S.pth + slot * d)), raw(at(w, S.pT + slot * dd)),
        raw(at(w, S.pTT + slot * dd * d)), raw(at(w, S.pdH + slot * d)), raw(at(w, S.pHH + slot * dd)))
@@ -62,13 +66,14 @@ def _eval(ev, k, x, need, w, S, slot, d):
 # -- the step's equations ---------------------------------------------------------------------
 
 @njit(inline='always', **_OPTS)
-def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
+def _stages(z, jac, ev, P, c, q0, s, d, w, S):
     """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
     eq:vprk_3); with ``jac`` also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i G_i (sY, sG), double +
     correction weights.  In plain doubles every sum is formed to O(ε²) (:func:`_weighted_sum`):
     ϑ_q(Q_i) e_i goes to tE, e_i what forming Q_i in doubles dropped (Σ_j a_ij Y_j's rounding,
     q̃ + that sum's, q̃'s own ``S.eQ``: :func:`exact_points`), and what rounding the two sums to
     double dropped to ``S.sYe``, ``S.sGe``."""
+    k, h = P.k, P.h
     dd = d * d
     ddd = dd * d
     Q, th, T, TT, dH, HH = at(w, S.Q), at(w, S.th), at(w, S.T), at(w, S.TT), at(w, S.dH), at(w, S.HH)
@@ -95,14 +100,14 @@ def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
         ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),
            raw(at(dH, i * d)), raw(at(HH, i * dd)))
         if exact:
-            _apply(at(T, i * dd), e, at(tE, i * d), d)
+            apply(at(T, i * dd), e, at(tE, i * d), d)
         Gi = at(G, i * d)
-        _tapply(at(T, i * dd), at(z, i * d), Gi, d)
+        transpose_apply(at(T, i * dd), at(z, i * d), Gi, d)
         for m in range(d):
             st(Gi, m, ld(Gi, m) - h * ld(dH, i * d + m))
         if jac:
             Ki = at(K, i * dd)
-            _contract(at(TT, i * ddd), at(z, i * d), Ki, d)
+            contract(at(TT, i * ddd), at(z, i * d), Ki, d)
             for mn in range(dd):
                 st(Ki, mn, ld(Ki, mn) - h * ld(HH, i * dd + mn))
     for m in range(d):
@@ -128,7 +133,7 @@ def _stages(z, jac, ev, k, h, c, q0, s, d, w, S):
 
 
 @njit(inline='always', **_OPTS)
-def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
+def _residual(z, jac, r, ev, P, c, d, s, w, S):
     """The residual of the step's equations; returns the slot of ϑ_q in the pre term.
 
     R_i = ϑ(Q_i) − p̃ − Σ_j ā_ij G_j (+ μ d_i/b_i)  (eq:vprk_2, eq:vprk_lobatto).  With a coupled
@@ -142,11 +147,11 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
     guess put it, and the compensated sum of q_{n+1} accumulates it (a constant of the motion kept
     exactly in exact arithmetic then walks off by whole ulps, one sign: docs/brouwer.md).
     """
+    k, plan = P.k, P.plan
     dd = d * d
-    sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
-    iL = sd
-    iM = sd + d if coupled else sd
+    u = unknowns(plan, s, d)
+    iL, iM = u.L, u.M
     qbar, pbar, q0, pb = at(w, S.qbar), at(w, S.pbar), at(w, S.q0), at(w, S.pb)
     sY, sG, q1, p1, mid, tl = at(w, S.sY), at(w, S.sG), at(w, S.q1), at(w, S.p1), at(w, S.mid), at(w, S.tl)
     th, G, pth, pT, tE, pwe = at(w, S.th), at(w, S.G), at(w, S.pth), at(w, S.pT), at(w, S.tE), at(w, S.pwe)
@@ -164,15 +169,15 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             st(q0, m, ld(qbar, m))
             if exact:
                 st(e0, m, ld(qbe, m))
-    _stages(z, jac, ev, k, h, c, q0, s, d, w, S)
+    _stages(z, jac, ev, P, c, q0, s, d, w, S)
     px = START
     if coupled:
         if plan.pre_at == MIDPOINT:        # ϑ_q at the unprojected midpoint q̄_{n+1/2}
             for m in range(d):
                 st(mid, m, ld(q0, m) + 0.5 * ld(sY, m))
-            _eval(ev, k, mid, jac, w, S, MIDPOINT, d)
+            evaluate(ev, k, mid, jac, w, S, MIDPOINT, d)
             px = MIDPOINT
-        _tapply(at(pT, px * dd), Lz, pb, d)
+        transpose_apply(at(pT, px * dd), Lz, pb, d)
         for m in range(d):
             aT = plan.alpha * ld(pb, m)
             pbm = ld(pbar, m) + aT
@@ -208,11 +213,11 @@ def _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S):
             if exact:
                 st(e1, m, (ld(e0, m) + ld(w, S.sYe + m)) + rounding(ld(q0, m), ld(sY, m), a)
                    + rounding(a, plan.sigma * ld(Lz, m), q1m))
-        _eval(ev, k, q1, jac, w, S, END, d)
+        evaluate(ev, k, q1, jac, w, S, END, d)
         pp = END if plan.post_at == END else px
-        _tapply(at(pT, pp * dd), Lz, tl, d)
+        transpose_apply(at(pT, pp * dd), Lz, tl, d)
         if exact:
-            _apply(at(pT, END * dd), e1, at(w, S.eQ), d)        # ϑ_q(q_{n+1}) e_{n+1} (q̃'s e0 is used)
+            apply(at(pT, END * dd), e1, at(w, S.eQ), d)        # ϑ_q(q_{n+1}) e_{n+1} (q̃'s e0 is used)
         for m in range(d):
             a = ld(pb, m) + ld(sG, m)
             p1m = a + plan.sigma * ld(tl, m)
@@ -259,8 +264,7 @@ def _projection_jacobian(J, nz, px, c, plan, d, s, w, S):
     """The coupled projection's rows and columns: ∂R_i/∂Λ, ∂R_Λ/∂Λ and ∂R_Λ/∂Y_j (the derivatives of
     the pre and post terms of eq:symmetric_projection_pre/_post and the midpoint's)."""
     dd = d * d
-    sd = s * d
-    iL = sd
+    iL = unknowns(plan, s, d).L
     T, K, pT = at(w, S.T), at(w, S.K), at(w, S.pT)
     Sx, S1 = at(w, S.S), at(w, S.S + dd)
     sig, al = plan.sigma, plan.alpha
@@ -299,30 +303,30 @@ def _projection_jacobian(J, nz, px, c, plan, d, s, w, S):
 
 
 @njit(inline='always', **_OPTS)
-def _main(z, jac, r, J, ev, k, h, tb, plan, d, s, w, S):
+def _main(z, jac, r, J, ev, P, d, s, w, S):
     """Residual of the step's equations (:func:`_residual`) and, when ``jac``, their exact Jacobian
     into J (:func:`_stage_jacobian`, :func:`_projection_jacobian`, the Lobatto rows)."""
-    c = _coefficients(tb, s)
-    px = _residual(z, jac, r, ev, k, h, c, plan, d, s, w, S)
+    plan = P.plan
+    c = _coefficients(P.tb, s)
+    px = _residual(z, jac, r, ev, P, c, d, s, w, S)
     if not jac:
         return
     dd = d * d
     ddd = dd * d
-    sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
-    nz = sd + (d if coupled else 0) + (d if plan.lobatto else 0)
+    u = unknowns(plan, s, d)
+    iL, iM, nz = u.L, u.M, u.nz
     for i in range(nz * nz):
         st(J, i, 0.0)
-    Lz, pTT = at(z, sd), at(w, S.pTT)
+    Lz, pTT = at(z, iL), at(w, S.pTT)
     if coupled and plan.pre_at == MIDPOINT:
-        _contract(at(pTT, MIDPOINT * ddd), Lz, at(w, S.S), d)        # ∂(ϑ_q(M)ᵀΛ)/∂M
+        contract(at(pTT, MIDPOINT * ddd), Lz, at(w, S.S), d)        # ∂(ϑ_q(M)ᵀΛ)/∂M
     if coupled and plan.post_at == END:
-        _contract(at(pTT, END * ddd), Lz, at(w, S.S + dd), d)       # ∂(ϑ_q(q1)ᵀΛ)/∂q1
+        contract(at(pTT, END * ddd), Lz, at(w, S.S + dd), d)       # ∂(ϑ_q(q1)ᵀΛ)/∂q1
     _stage_jacobian(J, nz, c, plan, d, s, w, S)
     if coupled:
         _projection_jacobian(J, nz, px, c, plan, d, s, w, S)
     if plan.lobatto:
-        iM = sd + d if coupled else sd
         for i in range(s):
             for m in range(d):
                 st(J, (i * d + m) * nz + iM + m, c.d[i] / c.b[i])
@@ -340,7 +344,7 @@ def _prepare(ev, k, plan, d, w, S):
     pth, pT = at(w, S.pth), at(w, S.pT)
     exact = exact_points(ld(q, 0))
     if plan.post:
-        _eval(ev, k, q, False, w, S, START, d)
+        evaluate(ev, k, q, False, w, S, START, d)
     for m in range(d):
         if plan.pre == PRE_PREVIOUS:
             aL = plan.alpha * ld(lam, m)
@@ -358,7 +362,7 @@ def _prepare(ev, k, plan, d, w, S):
         for m in range(d):
             st(pbe, m, 0.0 * ld(q, m))
     if plan.pre == PRE_PREVIOUS:
-        _tapply(pT, lam, tl, d)
+        transpose_apply(pT, lam, tl, d)
         for m in range(d):
             aT = plan.alpha * ld(tl, m)
             pb = ld(pbar, m) + aT

@@ -1,6 +1,6 @@
 """Small dense linear algebra per lane and exact sums: LU with partial pivoting chosen per lane
 (:func:`lu_factor`, :func:`lu_solve`), the products with ϑ_q and ϑ_qq the equations are made of
-(:func:`_tapply`, :func:`_apply`, :func:`_contract`), the error-free transformations
+(:func:`transpose_apply`, :func:`apply`, :func:`contract`), the error-free transformations
 (:func:`rounding`, :func:`product_rounding`) and the compensated weighted sum of the stages
 (:func:`_weighted_sum`).  Every function is written against integrators/simd.py, so it serves one
 lane (scalar, complex-step, double-double) and W real lanes alike."""
@@ -177,7 +177,7 @@ def lu_solve(A, piv, x, n):
 
 
 @njit(inline='always', **_OPTS)
-def _tapply(T, v, out, d):
+def transpose_apply(T, v, out, d):
     """out_m = Σ_l T[l, m] v_l  (ϑ_qᵀ v)."""
     for m in range(d):
         acc = ld(T, m) * ld(v, 0)
@@ -187,7 +187,7 @@ def _tapply(T, v, out, d):
 
 
 @njit(inline='always', **_OPTS)
-def _apply(T, v, out, d):
+def apply(T, v, out, d):
     """out_l = Σ_m T[l, m] v_m  (ϑ_q v)."""
     for l in range(d):
         acc = ld(T, l * d) * ld(v, 0)
@@ -197,7 +197,7 @@ def _apply(T, v, out, d):
 
 
 @njit(inline='always', **_OPTS)
-def _contract(TT, v, out, d):
+def contract(TT, v, out, d):
     """out[m, n] = Σ_l TT[l, m, n] v_l  (∂(ϑ_qᵀ v)/∂q)."""
     dd = d * d
     for mn in range(dd):

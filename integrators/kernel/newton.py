@@ -98,7 +98,7 @@ def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
 
 
 @njit(**_OPTS)
-def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
+def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     """Newton's method with the exact Jacobian, kept while it contracts, for every active lane.
 
     ``mode`` MODE_MAIN solves the step's equations (:func:`_main`), MODE_POST the consecutive projection
@@ -114,7 +114,13 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
     tolerances are runtime data, ``P.cfg`` a :class:`Newton` record (:class:`integrators.engine.Tolerances`);
     with ``cfg.accept`` a finite iterate that has not converged after ``cfg.maxiter`` iterations is
     taken (GeometricIntegrators.jl's stopping rule).
+
+    ``iterate`` = (z, zev, r): the ``nz`` unknowns (the guess on entry), the solution, the residual;
+    ``factors`` = (LU, piv, known): the kept factors and the lanes whose factors they are; ``P`` the
+    :class:`Step`, ``g`` the :class:`Group`.
     """
+    z, zev, r = iterate
+    LU, piv, known = factors
     W = nlanes(z)           # (mode and nz arrive as runtime ints: a literal would compile this twice)
     w, S, f, F, ip, IP, cfg = g.w, g.S, g.f, g.F, g.ip, g.IP, P.cfg
     tol, refresh = cfg.tol, cfg.refresh
@@ -140,9 +146,9 @@ def _newton(mode, z, zev, r, nz, LU, piv, known, ev, P, d, s, g):
         jac = anyl(stale)
         Jx, pivx = (LU, piv) if W == 1 else (Jt, pivt)   # one lane: factorise in place
         if mode == MODE_MAIN:
-            _main(z, jac, r, Jx, ev, P.k, P.h, P.tb, P.plan, d, s, w, S)
+            _main(z, jac, r, Jx, ev, P, d, s, w, S)
         else:
-            post_term(P.post, z, jac, r, Jx, ev, P.k, P.plan.sigma, d, g.w, g.S)
+            post_term(P, z, jac, r, Jx, ev, d, w, S)
         if jac:
             lset(f, F.gjac, 0, lget(f, F.gjac, 0) + 1.0)
             lu_factor(Jx, pivx, nz)

@@ -12,7 +12,7 @@ from ..projections import START
 from ..simd import at, ld, mand, mnot, re, sel, st
 from .records import AR, _coefficients, DEPTH, _OPTS
 from .linalg import lu_factor, lu_solve, _scale
-from .equations import _eval
+from .equations import evaluate
 
 
 @njit(**_OPTS)
@@ -20,7 +20,7 @@ def _velocity(ev, P, q, v, where, d, g):
     """h·q̇(q) into v (lanes ``where``), q̇ solving Ω̄ q̇ = ∇H (eq:euler_lagrange_equations); zero
     where that is not finite."""
     w, S, ip, IP, h = g.w, g.S, g.ip, g.IP, P.h
-    _eval(ev, P.k, q, False, w, S, START, d)
+    evaluate(ev, P.k, q, False, w, S, START, d)
     T, dH, PL = at(w, S.pT), at(w, S.pdH), at(w, S.PL)
     for i in range(d):
         for j in range(d):

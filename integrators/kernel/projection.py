@@ -10,8 +10,8 @@ from numba.extending import overload
 from ..projections import END
 from ..simd import at, ld, st
 from .records import _OPTS
-from .linalg import _apply, _contract, rounding, _tapply
-from .equations import _eval, exact_points
+from .linalg import apply, contract, rounding, transpose_apply
+from .equations import evaluate, exact_points
 
 
 @njit(inline='always', **_OPTS)
@@ -23,8 +23,11 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
     MODE_POST, d unknowns): from the core's unprojected end point q̂, p̂ (``S.qh``, ``S.ph``, the
     step's q̄ + ΣbY, p̄ + ΣbG) and the iterate Λ = ``z``, write p_{n+1} into ``S.p1``, the d
     residuals into ``r`` and, when ``jac``, their Jacobian ∂r/∂Λ row-major into ``J``.  The kernel
-    then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1}; ``ev(x, k, jac, …)`` at a
-    point slot (:func:`_eval`) gives ϑ and its derivatives.  In plain doubles (``exact_points``)
+    then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1}.  What a post term may use,
+    all public (integrators.kernel, integrators.simd): ``evaluate(ev, k, x, jac, w, S, slot, d)``, ϑ
+    and its derivatives at x into a point slot (START, MIDPOINT, END; ``S.q1`` is scratch for such an
+    x); ``transpose_apply`` (ϑ_qᵀv), ``apply`` (ϑ_q v), ``contract`` (∂(ϑ_qᵀv)/∂q), ``rounding``
+    (TwoSum's error); ``at``, ``ld``, ``st`` of simd.  In plain doubles (``exact_points``)
     ``S.qhe`` and ``S.phe`` hold what rounding q̂ and p̂ to double dropped: a post term resolves Λ
     below an ulp of q when its residual sees its sums exactly, as this one does (ϑ at q̂ + σΛ as
     ϑ + ϑ_q e, e that error plus its own sum's, :func:`rounding`; p̂ + σϑ_qᵀΛ with its errors
@@ -39,10 +42,10 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
         st(q1, m, q1m)
         if exact:
             st(e1, m, ld(w, S.qhe + m) + rounding(ld(qh, m), sig * ld(z, m), q1m))
-    _eval(ev, k, q1, jac, w, S, END, d)
-    _tapply(T1, z, tl, d)
+    evaluate(ev, k, q1, jac, w, S, END, d)
+    transpose_apply(T1, z, tl, d)
     if exact:
-        _apply(T1, e1, te, d)
+        apply(T1, e1, te, d)
     for m in range(d):
         p1m = ld(ph, m) + sig * ld(tl, m)
         st(p1, m, p1m)
@@ -52,7 +55,7 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
         st(r, m, rm)
     if jac:
         S1 = at(w, S.S + dd)
-        _contract(TT1, z, S1, d)
+        contract(TT1, z, S1, d)
         for m in range(d):
             for n in range(d):
                 st(J, m * d + n, sig * (ld(T1, n * d + m) - ld(T1, m * d + n)) + (sig * sig) * ld(S1, m * d + n))
@@ -62,13 +65,14 @@ PAPER = 0      # ``post`` of the paper's projections: :func:`project`, compiled 
 #                would key the kernel on a Python object, which numba's cache cannot find again)
 
 
-def post_term(post, z, jac, r, J, ev, k, sig, d, w, S):
-    """The post term ``post`` (PAPER: :func:`project`; else a projection's own compiled function,
-    called with the same arguments), chosen when the kernel is compiled."""
+def post_term(P, z, jac, r, J, ev, d, w, S):
+    """The post term of the step's :class:`Step` record ``P``: its ``post`` (PAPER: :func:`project`;
+    else a projection's own compiled function, called as :func:`project` is), with the parameters
+    ``P.k`` and the weight σ = ``P.plan.sigma``; chosen when the kernel is compiled."""
 
 
 @overload(post_term, inline="always")
-def _post_term(post, z, jac, r, J, ev, k, sig, d, w, S):
-    if isinstance(post, types.Integer):
-        return lambda post, z, jac, r, J, ev, k, sig, d, w, S: project(z, jac, r, J, ev, k, sig, d, w, S)
-    return lambda post, z, jac, r, J, ev, k, sig, d, w, S: post(z, jac, r, J, ev, k, sig, d, w, S)
+def _post_term(P, z, jac, r, J, ev, d, w, S):
+    if isinstance(P[P.fields.index("post")], types.Integer):
+        return lambda P, z, jac, r, J, ev, d, w, S: project(z, jac, r, J, ev, P.k, P.plan.sigma, d, w, S)
+    return lambda P, z, jac, r, J, ev, d, w, S: P.post(z, jac, r, J, ev, P.k, P.plan.sigma, d, w, S)

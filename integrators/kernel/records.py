@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
+from ..projections import PRE_UNKNOWN
 from ..simd import _at
 
 _OPTS = dict(cache=True, error_model="numpy", nogil=True)
@@ -202,7 +203,37 @@ value buffer ``w`` and its :class:`Scratch` offsets ``S``, the real bookkeeping 
 q_{n+1} for the domain test)."""
 
 
+Pair = namedtuple("Pair", "k tab plan h newton")
+Pair.__doc__ = """What every step of a pair reads, as :func:`advance`, :func:`refactor` and :func:`probe` take
+it (made by integrators.engine.Engine.pair, the one place): the parameter values ``k`` (float64),
+the flat tableau ``tab`` (:func:`flat_tableau`), the :class:`Plan` as a plain tuple ``plan``, the step
+size ``h`` and Newton's rule ``newton`` (the float64 array of a :class:`Newton` record)."""
+
+Span = namedtuple("Span", "t0 first nsteps")
+Span.__doc__ = """The steps a call takes: ``nsteps`` of them, the one numbered ``first`` aiming at t0 + first·h."""
+
+Shape = namedtuple("Shape", "dim proto lay block")
+Shape.__doc__ = """How a call is laid out: ``dim`` d zeros (so that d is a compile-time constant: one
+compilation per dimension, loops over coordinates unrolled), ``proto`` W zeros of the number type (the
+lane width W, and int or float for the scratch), ``lay`` the :func:`layout` as three int64 arrays, and
+``block`` the points a thread takes at a time."""
+
+Outputs = namedtuple("Outputs", "rounds snap every")
+Outputs.__doc__ = """What a call writes besides the state: ``rounds`` (int64, a row per block, its columns
+:data:`ROUNDS`), the outputs ``snap`` = (q, p, Λ, mark) and their cadence ``every`` (0: none)."""
+
+Orders = namedtuple("Orders", "depth ordy ordl trust age")
+Orders.__doc__ = """Names for the columns of :class:`StateArrays`' ``orders`` (int64, a row per point): the
+predictor's state of a point between calls (the :class:`Flags` of the same names)."""
+ORDERS = Orders(*range(len(Orders._fields)))
+
+Rounds = namedtuple("Rounds", "steps iterations jacobians")
+Rounds.__doc__ = """Names for the columns of :class:`Outputs`' ``rounds``: a block's group steps, Newton
+iterations and Jacobians (:func:`_block`)."""
+ROUNDS = Rounds(*range(len(Rounds._fields)))
+
 N_SCRATCH, N_FLAGS, N_INT = len(Scratch._fields), len(Flags._fields), len(IntScratch._fields)
+N_NEWTON = len(Newton._fields)
 
 
 @njit(inline='always', **_OPTS)
@@ -212,10 +243,31 @@ def _records(lay):
             IntScratch(*to_fixed_tuple(lay[2], N_INT)))
 
 
+Unknowns = namedtuple("Unknowns", "L M nz")
+Unknowns.__doc__ = """The layout of a step's Newton unknowns z = [Y_1 … Y_s, Λ (coupled projections), μ
+(Lobatto tableaus)]: where Λ and μ start (``L``, ``M``; each s·d where it is absent) and how many
+there are (``nz``).  Made by :func:`unknowns` (kernel) and :func:`unknowns_of` (Python), the one
+place of this layout."""
+
+
+def unknowns_of(s, d, coupled, lobatto):
+    """:class:`Unknowns` of a pair with s stages in dimension d (Engine.nz, the state's arrays)."""
+    M = s * d + (d if coupled else 0)
+    return Unknowns(s * d, M, M + (d if lobatto else 0))
+
+
+@njit(inline='always', **_OPTS)
+def unknowns(plan, s, d):
+    """:class:`Unknowns` of the step with :class:`Plan` ``plan`` (the kernel's, by the same rule)."""
+    sd = s * d
+    M = sd + d if plan.pre == PRE_UNKNOWN else sd
+    return Unknowns(sd, M, M + d if plan.lobatto else M)
+
+
 @njit(inline='always', **_OPTS)
 def _newton_rule(c):
-    return Newton(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14], c[15],
-                  c[16])
+    """The :class:`Newton` record from its array (Tolerances.array)."""
+    return Newton(*to_fixed_tuple(c, N_NEWTON))
 
 
 @njit(inline='always', **_OPTS)

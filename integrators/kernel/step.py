@@ -9,7 +9,7 @@ from numba import njit
 
 from ..projections import PRE_PREVIOUS, PRE_UNKNOWN
 from ..simd import anyl, at, ld, lget, lset, mand, mnot, mor, nlanes, re, sel, st
-from .records import DEPTH, MODE_MAIN, MODE_POST, _OPTS, RECURRENCE, _runtime
+from .records import DEPTH, MODE_MAIN, MODE_POST, _OPTS, RECURRENCE, _runtime, unknowns
 from .linalg import rounding, _scale
 from .equations import exact_points, _prepare
 from .newton import _newton
@@ -26,15 +26,16 @@ def _none(f, F):
 
 
 @njit(**_OPTS)
-def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
-    """One step of the lanes ``f.active`` from the stage guess (and the guesses of Λ_{n+1} and μ),
-    starting from the kept Newton factors in the lanes ``known``; commits the new state of each lane
-    that succeeds.  Per lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
+def _attempt(known, start, ev, inside, P, d, s, nz, g):
+    """One step of the lanes ``f.active`` from ``start`` = (the stage guess, the guesses of Λ_{n+1}
+    and of μ), starting from the kept Newton factors in the lanes ``known``; commits the new state of
+    each lane that succeeds.  Per lane: ``f.okstep`` whether it did, ``f.itn`` += iterations."""
+    guess, lam0, mu0 = start
     w, S, f, F, ip, IP, plan = g.w, g.S, g.f, g.F, g.ip, g.IP, P.plan
     sd = s * d
     coupled = plan.pre == PRE_UNKNOWN
-    iL = sd
-    iM = sd + d if coupled else sd
+    u = unknowns(plan, s, d)
+    iL, iM = u.L, u.M
     q, lam = at(w, S.q), at(w, S.lam)
     qbar, pbar, sY, sG, p1 = at(w, S.qbar), at(w, S.pbar), at(w, S.sY), at(w, S.sG), at(w, S.p1)
     z, zev, r = at(w, S.z), at(w, S.zev), at(w, S.r)
@@ -50,7 +51,7 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
         if plan.lobatto:
             st(z, iM + m, ld(mu0, m))
             st(f, F.scale + iM + m, _scale(ld(pbar, m)))
-    _newton(_runtime(MODE_MAIN, nz), z, zev, r, nz, at(w, S.lu), at(ip, IP.piv), known, ev, P, d, s, g)
+    _newton(_runtime(MODE_MAIN, nz), (z, zev, r), nz, (at(w, S.lu), at(ip, IP.piv), known), ev, P, d, s, g)
     ok = ld(f, F.ok) != 0.0
     its = ld(f, F.its)
     inc, pn, ln = at(w, S.inc), at(w, S.pn), at(w, S.ln)
@@ -82,8 +83,8 @@ def _attempt(known, guess, lam0, mu0, ev, inside, P, d, s, nz, g):
                 st(phe, m, (ld(pbe, m) + ld(w, S.sGe + m)) + rounding(ld(pbar, m), ld(sG, m), phm))
             st(pz, m, ld(lam0, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
-        _newton(_runtime(MODE_POST, nz), pz, pzev, pr, _runtime(d, nz), at(w, S.PL), at(ip, IP.ipiv), _none(f, F), ev, P,
-                d, s, g)
+        _newton(_runtime(MODE_POST, nz), (pz, pzev, pr), _runtime(d, nz), (at(w, S.PL), at(ip, IP.ipiv), _none(f, F)), ev,
+                P, d, s, g)
         ok = mand(ok, ld(f, F.ok) != 0.0)
         its = its + ld(f, F.its)
         for m in range(d):
@@ -224,7 +225,7 @@ def _step(t_next, n0, ev, inside, P, d, s, nz, g):
     due = ld(f, F.okstep) != 0.0                # (okstep is free until _attempt sets it)
     trusted = mand(mand(ld(f, F.trust) != 0.0, due), ld(f, F.age) >= cfg.age)   # carried: try 0 untrusted, try 1 trusted
     known = mand(have, mor(mand(first_try, mnot(trusted)), mand(tries == 1.0, trusted)))
-    _attempt(known, guess, at(w, S.guess + sd), at(w, S.guess + sd + nl), ev, inside, P, d, s, nz, g)
+    _attempt(known, (guess, at(w, S.guess + sd), at(w, S.guess + sd + nl)), ev, inside, P, d, s, nz, g)
     ok = ld(f, F.okstep) != 0.0
     nxt = sel(mor(fresh, last), 3.0, sel(mand(first_try, have), 1.0, 2.0))   # the next try (3: none left)
     retry = mand(live, mand(mnot(ok), nxt < 3.0))
