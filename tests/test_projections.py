@@ -1,23 +1,28 @@
-"""The projections as a layer (integrators.projections): a new projection is a row of the table and,
-if it is solved after Ψ_h, one small compiled post term; the kernel is not edited.  Shown with a toy:
-the identity post projection, which ends every step where Ψ_h did (Λ = 0)."""
+"""The projections as a layer (integrators.projections): a new projection is a row of the table (with
+its own weights, if it likes) and, if it is solved after Ψ_h, one small compiled post term; the kernel
+is not edited.  Shown with toys: the momentum reset, a post term that evaluates ϑ and puts the step's
+end point on the constraint by moving p alone (q_{n+1} = q̂, p_{n+1} = ϑ(q̂), Λ = 0); and rows whose
+weights are not the paper's."""
 import numpy as np
 import pytest
 from numba import njit
 
 import integrators
 from integrators import projections
+from integrators.kernel import END, evaluate
 from integrators.projections import Projection, admission
 from integrators.simd import at, ld, st
 
 
 @njit(inline="always")
-def identity_post(z, jac, r, J, ev, k, sig, d, w, S):
-    """The post-term contract (integrators.kernel.project) with residual r = Λ: Newton's first
-    iterate is Λ = 0 exactly, and p_{n+1} = p̂."""
-    ph, p1 = at(w, S.ph), at(w, S.p1)
+def reset_post(z, jac, r, J, ev, k, sig, d, w, S):
+    """The post-term contract (integrators.kernel.project): p_{n+1} = ϑ(q̂), evaluated at the core's end
+    point q̂ into the END slot; the residual r = Λ, so Newton's first iterate is Λ = 0 exactly and
+    q_{n+1} = q̂."""
+    evaluate(ev, k, at(w, S.qh), False, w, S, END, d)
+    th, p1 = at(w, S.pth + END * d), at(w, S.p1)
     for m in range(d):
-        st(p1, m, ld(ph, m))
+        st(p1, m, ld(th, m))
         st(r, m, ld(z, m))
     if jac:
         for m in range(d):
@@ -25,13 +30,13 @@ def identity_post(z, jac, r, J, ev, k, sig, d, w, S):
                 st(J, m * d + n, 1.0 if m == n else 0.0)
 
 
-IDENTITY = Projection("identity", "none", "start", True, "end", "one", (), post_term=identity_post)
+RESET = Projection("reset", "none", "start", True, "end", "one", (), post_term=reset_post)
 
 
 @pytest.fixture
-def with_identity(monkeypatch):
+def with_reset(monkeypatch):
     """The table with the toy's row added, as a reader adding a sixth projection would."""
-    monkeypatch.setitem(projections.RECORDS, "identity", IDENTITY)
+    monkeypatch.setitem(projections.RECORDS, "reset", RESET)
 
 
 def _vortices(n=11):
@@ -40,24 +45,28 @@ def _vortices(n=11):
     return sy, q0
 
 
+@pytest.mark.slow                               # a post term of one's own compiles (and cannot cache) its kernel
 @pytest.mark.parametrize("n", [3, 11])          # the scalar path, and 8 lanes with one group part-filled
-def test_a_toy_post_projection_runs_through_the_table_and_one_function(with_identity, n):
-    """Every step of 'identity' starts on the constraint (q_n, ϑ(q_n)) as a projected step does, runs
-    Ψ_h, and ends at Ψ_h's point: Λ is exactly 0 at every step; every step is one unprojected step
-    from (q_n, ϑ(q_n)) to Newton's tolerance (ϑ(q_n) compiled here, by numpy there); and p_{n+1} is left off the constraint by the method's
-    local error, where the standard projection (the same row with the paper's post term) puts it on."""
+def test_a_toy_post_projection_runs_through_the_table_and_one_function(with_reset, n):
+    """Every step of 'reset' starts on the constraint (q_n, ϑ(q_n)) as a projected step does, runs Ψ_h,
+    and ends at Ψ_h's q with p on the constraint: Λ is exactly 0 at every step; q_{n+1} is one
+    unprojected step's from (q_n, ϑ(q_n)) to Newton's tolerance (ϑ(q_n) compiled here, by numpy
+    there); p_{n+1} = ϑ(q_{n+1}) to round-off (the post term's ϑ against numpy's), where that
+    unprojected step leaves p off the constraint by the method's local error; and the standard
+    projection (the same row with the paper's post term) moves q instead."""
     sy, q0 = _vortices(n)
     h, steps = 0.1, 12
-    toy = integrators.integrate(sy, q0, tableau="GLRK2", projection="identity", h=h, steps=steps)
-    assert toy.projection == "identity" and np.all(toy.steps_taken == steps)
+    toy = integrators.integrate(sy, q0, tableau="GLRK2", projection="reset", h=h, steps=steps)
+    assert toy.projection == "reset" and np.all(toy.steps_taken == steps)
     assert np.array_equal(toy.lam, np.zeros_like(toy.lam))
+    off = 0.0
     for i in range(steps):
         one = integrators.integrate(sy, toy.q[i], tableau="GLRK2", projection="none", h=h, steps=1)
         assert np.max(np.abs(one.q[1] - toy.q[i + 1])) < 1e-12
-        assert np.max(np.abs(one.p[1] - toy.p[i + 1])) < 1e-12
-    off = np.max(np.abs(toy.p[1:] - sy.theta(toy.q[1:])))
+        off = max(off, np.max(np.abs(one.p[1] - sy.theta(one.q[1]))))
+    assert np.max(np.abs(toy.p[1:] - sy.theta(toy.q[1:]))) < 1e-14 < 1e-9 < off, off
     std = integrators.integrate(sy, q0, tableau="GLRK2", projection="standard", h=h, steps=steps)
-    assert off > 1e-9 and np.max(np.abs(std.p[1:] - sy.theta(std.q[1:]))) < 1e-12, off
+    assert np.max(np.abs(std.q[1:] - toy.q[1:])) > 1e-11
 
 
 def test_a_record_is_taken_in_place_of_a_name():
@@ -75,14 +84,14 @@ def test_a_post_term_needs_a_projection_solved_after_the_step():
     """A post term on a row that is not solved after Ψ_h (no post, or coupled) is refused in one line,
     as an unknown name is."""
     T = integrators.tableau("GLRK2")
-    coupled = Projection("mine", "unknown", "start", True, "end", "R_inf", (), post_term=identity_post)
+    coupled = Projection("mine", "unknown", "start", True, "end", "R_inf", (), post_term=reset_post)
     assert "not solved after" in admission(T, coupled)
     with pytest.raises(ValueError, match="not solved after"):
         integrators.Engine(integrators.system("point_vortices"), T, coupled, 0.1)
     assert "unknown projection 'sixth'" in admission(T, "sixth")
 
 
-def test_one_list_of_projections_for_scenes_the_audit_and_run_files(with_identity):
+def test_one_list_of_projections_for_scenes_the_audit_and_run_files(with_reset):
     """A row added to RECORDS is named by a scene's run.projections and by the audit as by
     integrate (they read the one list, integrators.projections.names()); its pair's name in a run file
     splits back into the tableau and it.  A name that would not split (a '-') is refused in one line
@@ -93,17 +102,17 @@ def test_one_list_of_projections_for_scenes_the_audit_and_run_files(with_identit
     from integrators.reference import Stepper
     from integrators.service.output import split_pair_name
     from integrators.service.scene import parse_scene
-    assert "identity" in projections.names()
-    sc = parse_scene(LV_PAIRS.replace('projections = ["none", "standard"]', 'projections = ["none", "identity"]'))
-    assert [(p.label, p.projection) for p in sc.pairs][:2] == [("GLRK1", "none"), ("GLRK1", "identity")]
-    cand, = audit.candidates_from("GLRK2", ["identity"])
-    assert cand.name == "GLRK2-identity" and split_pair_name(cand.name) == ("GLRK2", "identity")
+    assert "reset" in projections.names()
+    sc = parse_scene(LV_PAIRS.replace('projections = ["none", "standard"]', 'projections = ["none", "reset"]'))
+    assert [(p.label, p.projection) for p in sc.pairs][:2] == [("GLRK1", "none"), ("GLRK1", "reset")]
+    cand, = audit.candidates_from("GLRK2", ["reset"])
+    assert cand.name == "GLRK2-reset" and split_pair_name(cand.name) == ("GLRK2", "reset")
     with pytest.raises(ValueError, match="letters, digits and '_'"):
         Projection("my-standard", "none", "start", True, "end", "one", ())
     sy, T = integrators.system("point_vortices"), integrators.tableau("GLRK2")
     for engine in (Stepper, Oracle):
         with pytest.raises(ValueError, match="own post term"):
-            engine(sy, T, "identity", 0.1)
+            engine(sy, T, "reset", 0.1)
 
 
 # Rows with their own weights (GeometricIntegrators.jl's projections are weights before and after the
@@ -177,3 +186,22 @@ def test_weights_are_numbers_and_a_row_without_a_perturbation_has_no_pre_weight(
     with pytest.raises(ValueError, match="pre_sign must be 'one' or 'R_inf'"):
         Projection("mine", "unknown", "start", True, "end", "one", (), pre_sign="half")
     assert "needs |R(∞)| = 1" in admission(integrators.tableau("RadIIA2"), WEIGHTED[2])
+
+
+def test_a_weighted_row_runs_through_a_scene_into_a_run_file(monkeypatch, tmp_path):
+    """A row with its own weights added to RECORDS (data: it compiles nothing of its own) is a scene's
+    pair: the driver runs it beside the paper's symmetric row into a run file, where it is read back by
+    its name, finished, on the constraint to round-off at every output, and with its own energy error
+    (the weights reached the run)."""
+    from helpers import LV_PAIRS
+    from integrators.service import driver, read_run
+    from integrators.service.scene import parse_scene
+    monkeypatch.setitem(projections.RECORDS, "half_symmetric", HALF)
+    text = LV_PAIRS.replace('tableaus = ["GLRK1", "GLRK2"]', 'tableaus = ["GLRK2"]') \
+        .replace('projections = ["none", "standard"]', 'projections = ["symmetric", "half_symmetric"]')
+    driver.run(parse_scene(text), tmp_path / "a.h5", progress=False)
+    run = read_run(tmp_path / "a.h5")
+    half, full = run["GLRK2-half_symmetric"], run["GLRK2-symmetric"]
+    assert half.status == full.status == "ok" and len(half.t) == 5
+    assert np.max(half.errors["constraint"]) < 1e-13
+    assert not np.array_equal(half.errors["energy"], full.errors["energy"])

@@ -94,17 +94,28 @@ def write_slab(folder, name, state: dict, s_max):
         raise OutputError(f"cannot write the checkpoint slab '{path}': {plain_error(exc)}") from None
 
 
-def _pad_stages(state, s_max):
-    """Y (n, s, d), jac_z (n, s + 2, d) and the predictor's defects (n, DEPTH (s + 2), d) padded with
-    zeros at their ends to the scene's largest s (the file's schema); driver._unpad cuts them back."""
+def _stage_rows(s):
+    """The rows (axis 1) of the state's stage-shaped fields for a pair of s stages: Y (s), jac_z
+    (s + 2: the stages, Λ, μ) and the predictor's defects (DEPTH (s + 2)).  The one place that knows
+    which fields grow with s (:func:`_pad_stages`, :func:`unpad_stages`)."""
     from ..kernel import DEPTH
-    Y = state["Y"]
-    extra = s_max - Y.shape[1]
-    if extra > 0:
-        pad = lambda a, k: np.concatenate([a, np.zeros((a.shape[0], k) + a.shape[2:], a.dtype)], axis=1)
-        state = dict(state, Y=pad(Y, extra), jac_z=pad(state["jac_z"], extra),
-                     defects=pad(state["defects"], DEPTH * extra))
-    return state
+    return {"Y": s, "jac_z": s + 2, "defects": DEPTH * (s + 2)}
+
+
+def _pad_stages(state, s_max):
+    """The stage-shaped fields (:func:`_stage_rows`) padded with zeros at their ends to the scene's
+    largest s (the file's schema); :func:`unpad_stages` cuts them back."""
+    s = state["Y"].shape[1]
+    if s_max <= s:
+        return state
+    pad = lambda a, k: np.concatenate([a, np.zeros((a.shape[0], k) + a.shape[2:], a.dtype)], axis=1)
+    have, want = _stage_rows(s), _stage_rows(s_max)
+    return dict(state, **{f: pad(state[f], want[f] - have[f]) for f in have})
+
+
+def unpad_stages(state, s):
+    """A state read from a checkpoint cut back to its pair's s stages (:func:`_pad_stages` undone)."""
+    return dict(state, **{f: state[f][:, :rows] for f, rows in _stage_rows(s).items()})
 
 
 def slot_files(c) -> list:

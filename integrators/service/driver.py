@@ -559,7 +559,7 @@ def _starting_state(comm, engine, q0, blocks, saved, s_tab, h):
         return engine.state(q0[lo:hi])
     rows = None
     if comm.rank == 0:
-        saved = _unpad(saved, s_tab)
+        saved = checkpoints.unpad_stages(saved, s_tab)
         rows = [{k: v[a:b] for k, v in saved.items()} for a, b in blocks]
     return State.from_checkpoint(comm.scatter(rows, root=0), h)
 
@@ -572,11 +572,6 @@ def last_checkpoint_step(steps, every) -> int:
     state kept is the one at the last multiple, from which a resume or a longer run continues (it
     recomputes that last partial interval, or goes on past it: on the cadence's grid)."""
     return steps - steps % every
-
-
-def _unpad(state, s):
-    from ..kernel import DEPTH
-    return dict(state, Y=state["Y"][:, :s], jac_z=state["jac_z"][:, :s + 2], defects=state["defects"][:, :DEPTH * (s + 2)])
 
 
 BATCH_SECONDS = 2.0          # outputs are taken together in batches of about this much advancing
