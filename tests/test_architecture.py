@@ -191,3 +191,14 @@ def test_no_function_of_the_kernel_takes_more_than_ten_arguments():
                     over.append(f"{path.relative_to(ROOT)}: {fn.name} ({n})")
     assert len(files) >= 8 and over == []
     assert max(len(p.read_text().splitlines()) for p in files) <= 800        # one module per role
+
+
+def test_every_package_folder_is_installed():
+    """pyproject.toml lists the packages a (non-editable) install copies: every folder of the two
+    packages that holds an __init__.py is among them (a new subpackage left out installs without it,
+    and only a clean install, as CI's, would notice)."""
+    import tomllib
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("integrators", "invariants")
+             for p in (ROOT / top).rglob("__init__.py")}
+    assert found <= listed, sorted(found - listed)
