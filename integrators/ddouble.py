@@ -62,7 +62,7 @@ make_attribute_wrapper(DDType, "hi", "hi")
 make_attribute_wrapper(DDType, "lo", "lo")
 
 
-# Vector forms (integrators/simd.py registers them: W double-doubles in two <W x double>, hi and
+# Vector forms (integrators/simd/pointers.py registers them: W double-doubles in two <W x double>, hi and
 # lo): ``dd`` and ``fma`` given vectors build and fuse them lane by lane, so every algorithm below,
 # written with + − × and these two, runs unchanged on W double-doubles with each lane's bits those
 # of the scalar code.

@@ -133,7 +133,7 @@ def test_generated_point_functions_are_double_double_exact(sysname, q0):
     assert abs(value(*got_H) - want) <= 1e-30 * max(abs(want), 1), float(value(*got_H) - want)
 
 
-# -- double-double lanes: W points in two vectors (integrators/simd.py's DDVec) ----------------------
+# -- double-double lanes: W points in two vectors (integrators.simd's DDVec) ----------------------
 
 DD_SYSTEMS = ("lotka_volterra_2d", "massless_charged_particle")
 

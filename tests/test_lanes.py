@@ -1,4 +1,4 @@
-"""Points in SIMD lanes give every point the bits of the scalar path (integrators/kernel/, simd.py).
+"""Points in SIMD lanes give every point the bits of the scalar path (integrators/kernel/, integrators/simd/).
 
 The kernel advances W = kernel.LANES (8) or kernel.WIDE (16) points in lockstep with every decision
 per lane; these tests hold it to its promise: a point's bits are those it gets alone on the scalar

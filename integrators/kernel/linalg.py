@@ -2,7 +2,7 @@
 (:func:`lu_factor`, :func:`lu_solve`), the products with ϑ_q and ϑ_qq the equations are made of
 (:func:`transpose_apply`, :func:`apply`, :func:`contract`), the error-free transformations
 (:func:`rounding`, :func:`product_rounding`) and the compensated weighted sum of the stages
-(:func:`_weighted_sum`).  Every function is written against integrators/simd.py, so it serves one
+(:func:`_weighted_sum`).  Every function is written against integrators.simd, so it serves one
 lane (scalar, complex-step, double-double) and W real lanes alike."""
 from __future__ import annotations
 
