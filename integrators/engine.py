@@ -23,14 +23,22 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import subprocess
 import sys
 import time
 from typing import NamedTuple
 
+import numba
 import numpy as np
+import sympy
 
-from .codegen import load_module, point_functions
+from . import kernel
+from .codegen import load_module, point_functions, post_entry
+from .ddouble import scale_array
+from .kernel import DEPTH, LANES, RECURRENCE, Newton, Pair, lane_width, layout, scalars_dd_points, theta_dd_points
 from .projections import admission, projection_record
+from .systems import system_from
+from .tableaus import tableau
 
 BLOCK = 64                     # points per block of the kernel's thread loop (any value gives the same bits)
 
@@ -53,19 +61,16 @@ CHECKPOINT_FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "have_histo
 
 def set_threads(n: int | None):
     """Use ``n`` threads over points (None: numba's default, every core)."""
-    import numba
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS if n is None else max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
 
 
 def max_threads() -> int:
     """The most threads over points numba can run here (NUMBA_NUM_THREADS: the cores, by default)."""
-    import numba
     return int(numba.config.NUMBA_NUM_THREADS)
 
 
 def kernel_cached() -> bool:
     """Whether numba's on-disk cache already holds a compiled step kernel (a first run compiles it)."""
-    from . import kernel
     try:
         return os.path.exists(kernel.advance._cache._cache_file._index_path)
     except AttributeError:          # another numba's internals: say nothing rather than guess
@@ -77,9 +82,6 @@ def compile_kernel(d, W, precision="double"):
     lanes and ``precision``.  A specialisation depends on nothing else (a system enters as function
     pointers of one type, the tableau and the projection as data), so a stand-in system of that
     dimension (ϑ and H polynomials) compiles the one every system of dimension d uses."""
-    import sympy
-    from .systems import system_from
-    from .tableaus import tableau
     q = sympy.symbols(f"x0:{d}")
     theta = [q[i + 1] if i % 2 == 0 else -q[i - 1] for i in range(d)]
     sy = system_from(theta, sum(x * x for x in q) / 2, list(q), name="kernel_stand_in")
@@ -95,7 +97,6 @@ def compile_kernels(specs):
     waits for the longest instead of their sum.  The children only fill numba's cache; the caller
     then loads them.  Returns the specs whose child failed (the caller compiles those itself, and
     meets their error there)."""
-    import subprocess
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [x for x in os.environ.get("PYTHONPATH", "").split(
         os.pathsep) if x]))
@@ -113,7 +114,6 @@ def compile_kernels(specs):
 
 
 def get_threads() -> int:
-    import numba
     return numba.get_num_threads()
 
 
@@ -172,7 +172,6 @@ class State:
         self.jac_z = np.zeros((n, s + 2, d), dt)
         self.jac_q = np.zeros((n, d), dt)
         self.jac_lam = np.zeros((n, d), dt)
-        from .kernel import DEPTH
         self.defects = np.zeros((n, DEPTH * (s + 2), d), dt)
         self.orders = np.zeros((n, 5), dtype=np.uint8)
         self.needs_factors = False      # have_lu read from a checkpoint: lu, piv to be rebuilt
@@ -225,7 +224,6 @@ class State:
         q2, p2, l2 = pairs(q), pairs(p), pairs(lam)
         st = cls(q2[..., 0], p2[..., 0], np.zeros(q2.shape[:2]), h, s)
         st.q, st.p = q2.copy(), p2.copy()
-        from .ddouble import scale_array
         st.Lam = scale_array(np.ascontiguousarray(l2), float(h))
         for name in ("q_comp", "p_comp", "mu", "jac_q", "jac_lam"):
             setattr(st, name, np.zeros_like(q2))
@@ -344,7 +342,6 @@ class Tolerances:
     recurrence: int = 4
 
     def __post_init__(self):
-        from .kernel import DEPTH, RECURRENCE
         if self.predictor not in PREDICTORS:
             raise ValueError(f"Tolerances.predictor must be one of {', '.join(PREDICTORS)}, got {self.predictor!r}")
         if isinstance(self.depth, bool) or not isinstance(self.depth, (int, np.integer)) or \
@@ -385,7 +382,6 @@ class Tolerances:
         filled by name.  With ``double_double``, tol, stall, the refresh floor, the trust floor and the
         64 ulps below which an update that stops halving is round-off (``fine``) scaled from
         double's eps to 2⁻¹⁰⁴ (the same rule, one number type down)."""
-        from .kernel import Newton
         scale = 2.0 ** -104 / np.finfo(np.float64).eps if double_double else 1.0
         defects = self.predictor == "defects"
         fresh = defects and unknowns <= self.trust_max_unknowns
@@ -411,7 +407,6 @@ def theta_dd(system, q2):
     out = np.zeros_like(q2)
     ev, _ = point_functions(system, precision="double-double")
     k = system.param_vector()
-    from .kernel import theta_dd_points
     theta_dd_points(ev, k, q2, out, np.zeros(2 * d * d), np.zeros(2 * d * d * d), np.zeros(2 * d), np.zeros(2 * d * d))
     return out
 
@@ -422,7 +417,6 @@ def scalars_dd(system, q2):
     q2 = np.ascontiguousarray(q2, dtype=np.float64)
     out = np.zeros((q2.shape[0], 2, 2))
     k = system.param_vector()
-    from .kernel import scalars_dd_points
     scalars_dd_points(load_module(system, "double-double").scalars_dd, k, q2, out)
     return out
 
@@ -443,12 +437,12 @@ class Engine:
             raise ValueError(why)
         self.system, self.tableau, self.h = system, tableau, float(h)
         self.projection = projection
-        from . import kernel
         self.record = rec = projection_record(projection)
         s, d = tableau.s, system.d
         lob = tableau.d is not None
         self.plan = kernel.Plan(*rec.codes(tableau), lob)
         self.post = kernel.PAPER if rec.post_term is None else rec.post_term
+        self._entry = None if rec.post_term is None else post_entry(rec.post_term)
         self.nz = kernel.unknowns_of(s, d, rec.coupled, lob).nz
         self.k = system.param_vector()
         self.tolerances = tolerances if tolerances is not None else Tolerances()
@@ -464,14 +458,12 @@ class Engine:
         """W of this pair's vector path on real states of many points: kernel.WIDE (16) for Newton
         systems of at most kernel.WIDE_NZ unknowns, kernel.LANES (8) above
         (:func:`integrators.kernel.lane_width`)."""
-        from .kernel import lane_width
         return lane_width(self.nz)
 
     def lanes_for(self, n, double_double=False):
         """The W a call on ``n`` points takes by default: 1 below kernel.LANES points; kernel.LANES
         for double-double states; else :func:`integrators.kernel.lane_width` (16 lanes for a small
         Newton system and at least kernel.WIDE_POINTS points, 8 otherwise)."""
-        from .kernel import LANES, lane_width
         return 1 if n < LANES else (LANES if double_double else lane_width(self.nz, n))
 
     def warm(self, q):
@@ -489,13 +481,11 @@ class Engine:
         the parameter values, the flat tableau, the projection's plan, h and Newton's rule (``newton``:
         the array of a :class:`integrators.kernel.Newton` record; None: this engine's for doubles).
         The one place the kernel's pair data is made."""
-        from .kernel import Pair
         return Pair(self.k, self.tab, tuple(self.plan), self.h, self._cfg if newton is None else newton)
 
     def _layout(self):
         """kernel.layout of this pair as the three int64 arrays the kernel takes."""
         if not hasattr(self, "_lay"):
-            from .kernel import layout
             self._lay = tuple(np.array(rec, dtype=np.int64) for rec in layout(self.tableau.s, self.system.d, self.nz))
         return self._lay
 
@@ -552,7 +542,6 @@ class Engine:
         return use, outs
 
     def _advance(self, state, first, nsteps, t0, block, lanes, every, K):
-        from . import kernel
         spec = self._specialise(state, lanes)
         rounds = self._rounds(state, block)
         arrays = state._tuple(self.nz)
@@ -561,10 +550,13 @@ class Engine:
         shape = (K,) + state.q.shape
         snap = (np.empty(shape, state.q.dtype), np.empty(shape, state.q.dtype), np.empty(shape, state.q.dtype),
                 np.zeros((K, state.q.shape[0]), np.uint8))
-        kernel.advance(spec.ev, spec.inside, self.post, self.pair(spec.newton),
-                       kernel.Span(float(t0), int(first), int(nsteps)), arrays,
-                       kernel.Shape((0,) * self.system.d, spec.proto, self._layout(), int(block)),
-                       kernel.Outputs(rounds, snap, int(every) if K > 0 else 0))
+        records = (self.pair(spec.newton), kernel.Span(float(t0), int(first), int(nsteps)), arrays,
+                   kernel.Shape((0,) * self.system.d, spec.proto, self._layout(), int(block)),
+                   kernel.Outputs(rounds, snap, int(every) if K > 0 else 0))
+        if self._entry is not None:             # a post term of the projection's own, cached
+            self._entry(spec.ev, spec.inside, *records)
+        else:                                   # the paper's (or a post term without source: uncached)
+            kernel.advance(spec.ev, spec.inside, self.post, *records)
         use = LaneUse(spec.lanes, *(int(x) for x in rounds.sum(axis=0)))
         return (use, snap) if every else use
 
@@ -575,7 +567,6 @@ class Engine:
         form), the point functions of that specialisation (compiled once per engine) and what the
         kernel is handed for it (Newton's rule with TOL and STALL scaled to 2⁻¹⁰⁴ for double-double;
         the prototype of a lane value: W zeros of the number type)."""
-        from . import kernel
         dd = state.q.ndim == 3
         W = self.lanes_for(state.q.shape[0], dd) if lanes is None else lanes
         if W not in (1, kernel.LANES, kernel.WIDE) or (dd and W == kernel.WIDE):
@@ -602,7 +593,6 @@ class Engine:
     def _refactor(self, state, arrays, double_double, cplx):
         """The Newton factors of a state that notes them but does not hold them (read from a
         checkpoint), rebuilt where they were taken, by the scalar path (kernel.refactor)."""
-        from . import kernel
         key = ("dd", 1) if double_double else (cplx, 1)
         if key not in self._functions:
             ev, inside = point_functions(self.system, cplx, precision="double-double") if double_double else \
@@ -732,9 +722,18 @@ def _lagrange_matrix(nodes, targets):
 SNAPSHOT_BYTES = 32 << 20     # march's outputs inside one call (q, p, Λ of every point): at most this
 
 
-def march(engine, state, start, stop, every, on_output=None, progress=None, check=None, t0=0.0, target=0.25,
-          block=BLOCK, light=None):
-    """The time loop: advance ``state`` from step ``start`` to ``stop``.
+class Hooks(NamedTuple):
+    """What :func:`march` calls back, each optional: ``on_output(step)`` (or ``on_output(step,
+    output)``), ``progress(step)``, ``check()`` and ``light(step)``."""
+    on_output: object = None
+    progress: object = None
+    check: object = None
+    light: object = None
+
+
+def march(engine, state, start, stop, every, hooks=Hooks(), t0=0.0, target=0.25, block=BLOCK):
+    """The time loop: advance ``state`` from step ``start`` to ``stop``, calling back ``hooks``
+    (:class:`Hooks`).
 
     After every step that is a multiple of ``every``, ``on_output(step)`` is called (a checkpoint
     may be written there).  The kernel is called for as many steps as take about ``target`` seconds
@@ -750,6 +749,7 @@ def march(engine, state, start, stop, every, on_output=None, progress=None, chec
     (docs/benchmarks.md, "What a call costs").  Engines without ``advance_outputs`` (a step map)
     end every call at an output, as without ``light``.
     """
+    on_output, progress, check, light = hooks
     outputs = light is not None and hasattr(engine, "advance_outputs")
     if outputs:     # outputs of one call held at once: at most SNAPSHOT_BYTES
         most = max(1, SNAPSHOT_BYTES // max(1, 3 * state.q.nbytes))

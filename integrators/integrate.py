@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from .ddouble import divide_array
-from .engine import BLOCK, PRECISIONS, Engine, Tolerances, march
+from .engine import BLOCK, PRECISIONS, Engine, Hooks, Tolerances, march
 from .tableaus import Tableau, tableau as builtin_tableau
 
 
@@ -161,9 +161,9 @@ def integrate(system, q0, *, tableau="GLRK2", projection="symmetric", h=None, st
         out_l[k] = divide_array(at.Lam, h) if dd else at.Lam / h
 
     record(0)
-    march(engine, state, 0, steps, save_every, on_output=record, t0=t0,
-          progress=None if progress is None else (lambda step: progress(step, steps)),
-          block=int(chunk) if chunk is not None else BLOCK, light=lambda step: True)
+    march(engine, state, 0, steps, save_every,
+          Hooks(on_output=record, progress=None if progress is None else (lambda step: progress(step, steps)),
+                light=lambda step: True), t0=t0, block=int(chunk) if chunk is not None else BLOCK)
     full = (nsave,) + lead + (system.d,)
     lo = {}
     if dd:

@@ -33,7 +33,7 @@ lock and at most once per signature (a nested compile of a held signature goes o
 And it keeps a cached function from outliving a change to the code it calls.  numba checks a
 cached function against its own file's time stamp only, but its machine code holds every compiled
 function it calls, inlined or not, from whichever module.  The kernel is split by role over
-integrators/kernel/*.py and calls integrators/simd.py and ddouble.py: editing the Newton module
+integrators/kernel/*.py and calls integrators/simd/*.py and ddouble.py: editing the Newton module
 alone would leave ``advance`` cached with the old Newton in it.  So :func:`install` makes the source
 stamp of every cached function of this package the stamps of all the package's modules that
 compile code (:func:`compiled_sources`): a change to any of them recompiles all of them.
@@ -80,7 +80,9 @@ def install() -> bool:
     save, load = cls.save, cls.load
 
     def locked_save(self, key, data):
-        try:
+        if "PostTerm(" in str(key[0]):         # a kernel function specialised to a projection's own post
+            return None                         # term: its code is cached in the generated entry that
+        try:                                    # holds it (integrators.codegen.post_entry), not here
             os.makedirs(self._cache_path, exist_ok=True)
             with _locked(self._cache_path, exclusive=True):
                 return save(self, key, data)

@@ -236,11 +236,11 @@ slow = 0.0 if comm.size == 1 else 0.012 * (1 + (comm.rank - rank_slowest) % comm
 rng = random.Random(comm.rank)
 march = driver.march
 
-def uneven(engine, st, start, stop, every, on_output, *args, **kw):
+def uneven(engine, st, start, stop, every, hooks, *args, **kw):
     def late(step, *out):             # this rank reaches its outputs late by a random 0-slow s
         time.sleep(rng.uniform(0.0, slow))
-        on_output(step, *out)
-    return march(engine, st, start, stop, every, late, *args, **kw)
+        hooks.on_output(step, *out)
+    return march(engine, st, start, stop, every, hooks._replace(on_output=late), *args, **kw)
 
 driver.march = uneven
 driver._batch = lambda seconds_per_output, points: 2

@@ -172,16 +172,17 @@ def test_pages_and_docstrings_state_today():
 
 def test_no_function_of_the_kernel_takes_more_than_ten_arguments():
     """What crosses into the kernel travels as named records (integrators.kernel.records: Pair, Span,
-    Shape, Outputs, Step, Group), not as long positional lists: no function of integrators/kernel/
-    and no method of the engine's classes takes more than 10 arguments (self not counted); and the
-    kernel is one module per role, none over 800 lines."""
+    Shape, Outputs, Step, Group), not as long positional lists: no function of integrators/kernel/,
+    of the engine (integrators/engine.py: its time loop takes its callbacks as one Hooks record) or of
+    the driver, and no method of their classes, takes more than 10 arguments (self not counted); and
+    the kernel and the lanes (integrators/simd/) are one module per role, none over 800 lines, as is
+    the scene reader."""
     import ast
     over = []
     files = sorted((ROOT / "integrators" / "kernel").glob("*.py"))
-    for path in files + [ROOT / "integrators" / "engine.py"]:
+    for path in files + [ROOT / "integrators" / "engine.py", ROOT / "integrators" / "service" / "driver.py"]:
         tree = ast.parse(path.read_text())
-        scopes = tree.body if path.parent.name == "kernel" else \
-            [n for c in tree.body if isinstance(c, ast.ClassDef) for n in c.body]
+        scopes = tree.body + [n for c in tree.body if isinstance(c, ast.ClassDef) for n in c.body]
         for fn in scopes:
             if isinstance(fn, ast.FunctionDef):
                 a = fn.args
@@ -190,7 +191,29 @@ def test_no_function_of_the_kernel_takes_more_than_ten_arguments():
                 if n > 10:
                     over.append(f"{path.relative_to(ROOT)}: {fn.name} ({n})")
     assert len(files) >= 8 and over == []
-    assert max(len(p.read_text().splitlines()) for p in files) <= 800        # one module per role
+    lanes = sorted((ROOT / "integrators" / "simd").glob("*.py"))             # the lanes likewise, and scenes
+    sizes = {p.name: len(p.read_text().splitlines()) for p in files + lanes + [ROOT / "integrators" / "service" / "scene.py"]}
+    assert len(lanes) >= 5 and max(sizes.values()) <= 800, sizes            # one module per role
+
+
+def test_the_engine_imports_at_its_top():
+    """integrators/engine.py imports what it uses once, at the top (the kernel costs nothing to import
+    once numba is loaded, and the package loads numba on import): no function of it imports."""
+    import ast
+    tree = ast.parse((ROOT / "integrators" / "engine.py").read_text())
+    inside = [f"{fn.name}: line {n.lineno}" for fn in ast.walk(tree) if isinstance(fn, ast.FunctionDef)
+              for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))]
+    assert inside == []
+
+
+def test_no_driver_function_is_long():
+    """The driver's functions fit on a page: none over 80 lines (a pair's run is a class, _PairRun,
+    whose parts are named: its set-up, its first interval, what an output does)."""
+    import ast
+    tree = ast.parse((ROOT / "integrators" / "service" / "driver.py").read_text())
+    long = [f"{fn.name} ({fn.end_lineno - fn.lineno + 1})" for fn in ast.walk(tree)
+            if isinstance(fn, ast.FunctionDef) and fn.end_lineno - fn.lineno + 1 > 80]
+    assert long == []
 
 
 def test_every_package_folder_is_installed():

@@ -128,7 +128,7 @@ def test_outputs_inside_a_call_are_the_state_a_call_ending_there_leaves(scene, p
     """march with ``light`` (Engine.advance_outputs: calls that run past outputs and record them)
     against a call per output: q, p, Λ, live and the breakdown times at each of 40 outputs bitwise
     equal, on points that break down at steps spread over the run; the final states equal too."""
-    from integrators.engine import Engine, march
+    from integrators.engine import Engine, Hooks, march
     from integrators.service.scene import load_scene
     sc = load_scene(scene)
     q0 = sc.loop_points()[::8]
@@ -142,7 +142,7 @@ def test_outputs_inside_a_call_are_the_state_a_call_ending_there_leaves(scene, p
             at = st if out is None else out
             rows.append((step,) + tuple(np.array(getattr(at, f)) for f in ("q", "p", "Lam", "live", "breakdown_time")))
 
-        march(eng, st, 0, 40, 1, on_output, light=light, target=1e-9 if light is None else 10.0)
+        march(eng, st, 0, 40, 1, Hooks(on_output, light=light), target=1e-9 if light is None else 10.0)
         got[light is None] = rows, st
     (per_call, a), (inside, b) = got[True], got[False]
     assert [r[0] for r in per_call] == [r[0] for r in inside] == list(range(1, 41))

@@ -45,7 +45,7 @@ def _vortices(n=11):
     return sy, q0
 
 
-@pytest.mark.slow                               # a post term of one's own compiles (and cannot cache) its kernel
+@pytest.mark.slow                               # a post term of one's own compiles its kernel (once per machine)
 @pytest.mark.parametrize("n", [3, 11])          # the scalar path, and 8 lanes with one group part-filled
 def test_a_toy_post_projection_runs_through_the_table_and_one_function(with_reset, n):
     """Every step of 'reset' starts on the constraint (q_n, ϑ(q_n)) as a projected step does, runs Ψ_h,
@@ -67,6 +67,71 @@ def test_a_toy_post_projection_runs_through_the_table_and_one_function(with_rese
     assert np.max(np.abs(toy.p[1:] - sy.theta(toy.q[1:]))) < 1e-14 < 1e-9 < off, off
     std = integrators.integrate(sy, q0, tableau="GLRK2", projection="standard", h=h, steps=steps)
     assert np.max(np.abs(std.q[1:] - toy.q[1:])) > 1e-11
+
+
+_AGAIN = """
+import sys, numpy as np
+sys.path.insert(0, {tests!r})
+import integrators
+from integrators import codegen
+from test_projections import RESET, _vortices
+sy, q0 = _vortices(3)
+sol = integrators.integrate(sy, q0, tableau="GLRK2", projection=RESET, h=0.1, steps=12)
+entry, = [m.advance for k, m in codegen._LOADED.items() if k in codegen._POSTS]
+print(sum(entry.stats.cache_hits.values()), sum(entry.stats.cache_misses.values()), sol.q.tobytes().hex())
+"""
+
+
+@pytest.mark.slow                               # the first call compiles the toy's kernel (a few minutes)
+def test_a_post_term_of_ones_own_is_compiled_once_per_machine():
+    """The toy's kernel compiled here is cached: another process that runs the same post term loads it
+    (one cache hit, no compilation) and gives the same bits."""
+    import os
+    import subprocess
+    import sys
+    sy, q0 = _vortices(3)
+    sol = integrators.integrate(sy, q0, tableau="GLRK2", projection=RESET, h=0.1, steps=12)
+    out = subprocess.run([sys.executable, "-c", _AGAIN.format(tests=os.path.dirname(__file__))],
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["1", "0", sol.q.tobytes().hex()]
+
+
+@pytest.mark.slow                               # the toy's kernel for 16 lanes of d = 2 (a few minutes, once)
+def test_the_toy_post_term_runs_through_a_scene_a_run_file_and_the_audit(monkeypatch, tmp_path):
+    """'reset' added to RECORDS, as docs/engine.md says, and nothing else: a scene names it beside the
+    standard projection and the driver runs both into a run file, where 'reset' reads back finished,
+    with p on the constraint to round-off at every output (its post term put it there) and q away from
+    the standard row's; the audit takes it by name, and its step map is integrate's step, bit for bit;
+    it measures the toy's drift and one-step defects (finite numbers) without a breakdown, and those
+    of the weighted row (HALF) beside it."""
+    from helpers import LV_PAIRS
+    from integrators import audit
+    from integrators.service import driver, read_run
+    from integrators.service.scene import parse_scene
+    monkeypatch.setitem(projections.RECORDS, "reset", RESET)
+    text = LV_PAIRS.replace('tableaus = ["GLRK1", "GLRK2"]', 'tableaus = ["GLRK2"]') \
+        .replace('projections = ["none", "standard"]', 'projections = ["standard", "reset"]')
+    scene = parse_scene(text)
+    driver.run(scene, tmp_path / "a.h5", progress=False)
+    run = read_run(tmp_path / "a.h5")
+    toy, std = run["GLRK2-reset"], run["GLRK2-standard"]
+    assert toy.status == std.status == "ok" and len(toy.t) == 5
+    assert np.max(toy.errors["constraint"]) < 1e-13
+    assert not np.array_equal(toy.errors["energy"], std.errors["energy"])
+    cand, = audit.candidates_from("GLRK2", ["reset"])
+    sy = scene.system()
+    q = scene.loop_points()[:16]
+    q1, p1, lam1 = cand.step(q, sy.theta(q), np.zeros_like(q), scene.h, sy)
+    one = integrators.integrate(sy, q, tableau="GLRK2", projection="reset", h=scene.h, steps=1)
+    assert np.array_equal(q1, one.q[1]) and np.array_equal(p1, one.p[1]) and not np.any(lam1)
+    monkeypatch.setitem(projections.RECORDS, "half_symmetric", HALF)        # and the weighted row beside it
+    cands = audit.candidates_from("GLRK2", ["reset", "half_symmetric"])
+    rep = audit.audit(cands, scene, defect_points=2, levels=2, method="central differences")
+    assert [e["name"] for e in rep["candidates"]] == ["GLRK2-reset", "GLRK2-half_symmetric"]
+    for entry in rep["candidates"]:
+        assert entry["breakdown_step"] is None and entry["drift"]
+        defects = [x for f in entry["defect"].values() for x in (f["defect"] or [])]
+        assert defects and all(np.isfinite(defects)), entry["defect"]
 
 
 def test_a_record_is_taken_in_place_of_a_name():

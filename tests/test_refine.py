@@ -165,11 +165,11 @@ comm = communicator()
 rng = random.Random(comm.rank)
 march = driver.march
 
-def uneven(engine, st, start, stop, every, on_output, *args, **kw):
+def uneven(engine, st, start, stop, every, hooks, *args, **kw):
     def late(step, *out):
         time.sleep(rng.uniform(0.0, 0.01 * comm.rank))
-        on_output(step, *out)
-    return march(engine, st, start, stop, every, late, *args, **kw)
+        hooks.on_output(step, *out)
+    return march(engine, st, start, stop, every, hooks._replace(on_output=late), *args, **kw)
 
 driver.march = uneven
 driver._batch = lambda seconds_per_output, points: 2

@@ -50,14 +50,14 @@ def run_drift(cand: Candidate, scene, progress=None):
     live = np.ones(q0.shape[0], dtype=bool)
     rows, first_break = [diag.row(0.0, q, p, lam, live)], None
     if cand.kind == "pair":           # the compiled engine's time loop, as a batch run takes it
-        from ..engine import Engine, march
+        from ..engine import Engine, Hooks, march
         engine = Engine(system, cand.tableau, cand.projection, h)
         state = engine.state(q0, p, lam)
 
         def on_output(k):
             rows.append(diag.row(k * h, state.q, state.p, state.Lam / h, state.live))
 
-        march(engine, state, 0, scene.steps, scene.output_every, on_output, progress)
+        march(engine, state, 0, scene.steps, scene.output_every, Hooks(on_output, progress))
         broke = np.isfinite(state.breakdown_time)
         if broke.any():
             first_break = int(round(float(np.min(state.breakdown_time[broke])) / h))

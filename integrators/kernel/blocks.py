@@ -243,8 +243,10 @@ def advance(ev, inside, post, pair, span, st_, shape, outputs):
     blocks spread over the threads, and W = len(proto) at a time within a block (``ev`` must be the
     W-lane point function); a point's steps never depend on its block, its lanes, its thread or its
     neighbours.  ``post``: the projection's post term, PAPER for :func:`project` (read only by
-    projections solved after Ψ_h); a projection's own compiled function compiles (and does not
-    cache) a kernel of its own.
+    projections solved after Ψ_h); a projection's own post term arrives as a type
+    (:class:`~integrators.kernel.projection.PostTerm`, from the cached entry
+    :func:`integrators.codegen.post_entry` generates) or, where its source cannot be read, as the
+    compiled function itself (a kernel of its own in every process).
 
     ``st_``: the :class:`StateArrays` as a plain tuple; ``pair.newton``: the float64 array of a
     :class:`Newton` record (:class:`integrators.engine.Tolerances`); ``shape.lay``: :func:`layout` as

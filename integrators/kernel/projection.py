@@ -5,7 +5,7 @@ docs/engine.md, "A projection of one's own")."""
 from __future__ import annotations
 
 from numba import njit, types
-from numba.extending import overload
+from numba.extending import intrinsic, models, overload, register_model
 
 from ..projections import END
 from ..simd import at, ld, st
@@ -73,6 +73,38 @@ def post_term(P, z, jac, r, J, ev, d, w, S):
 
 @overload(post_term, inline="always")
 def _post_term(P, z, jac, r, J, ev, d, w, S):
-    if isinstance(P[P.fields.index("post")], types.Integer):
+    post = P[P.fields.index("post")]
+    if isinstance(post, types.Integer):
         return lambda P, z, jac, r, J, ev, d, w, S: project(z, jac, r, J, ev, P.k, P.plan.sigma, d, w, S)
+    if isinstance(post, PostTerm):
+        fn = post.fn
+        return lambda P, z, jac, r, J, ev, d, w, S: fn(z, jac, r, J, ev, P.k, P.plan.sigma, d, w, S)
     return lambda P, z, jac, r, J, ev, d, w, S: P.post(z, jac, r, J, ev, P.k, P.plan.sigma, d, w, S)
+
+
+class PostTerm(types.Type):
+    """A projection's own post term as a type with no value: the kernel calls ``fn`` (a compiled
+    function) where it reads ``P.post``, and nothing of the function is held in a value, so a kernel
+    compiled for it holds no address of this process and numba can cache it (:func:`token`)."""
+
+    def __init__(self, fn):
+        self.fn = fn
+        f = fn.py_func
+        super().__init__(name=f"PostTerm({f.__module__}.{f.__qualname__}@{id(fn):x})")
+
+    def __reduce__(self):               # a cache index's key: another process finds no such function
+        return types.Opaque, (f"gone {self.name}",)
+
+
+register_model(PostTerm)(models.OpaqueModel)
+
+
+def token(fn):
+    """An intrinsic ``t()`` giving the :class:`PostTerm` of the compiled post term ``fn``: what a
+    generated kernel entry hands the kernel as its ``post`` (:mod:`integrators.kernel.custom`)."""
+    ty = PostTerm(fn)
+
+    @intrinsic
+    def t(typingctx):
+        return ty(), lambda context, builder, sig, args: context.get_constant_null(ty)
+    return t

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from . import checkpoints, files, output, resumable, statuses
-from ..engine import Engine, MapEngine, State, Tolerances, march, set_threads
+from ..engine import Engine, Hooks, MapEngine, State, Tolerances, march, set_threads
 from .clocks import Spent, pair_clock
 from .diagnostics import Diagnostics
 from .ranks import Planner, communicator, default_threads, split
@@ -408,7 +408,7 @@ def _advance_pairs(comm, scene, system, q0, path, opened, resume, after_output, 
         jobs = [(pair, job) for pair, job in zip(scene.pairs, opened.todo) if job is not None]
         for i, (pair, job) in enumerate(jobs):
             check()
-            _run_pair(comm, stream, scene, system, q0, pair, job, i == 0, i + 1 < len(jobs), bar, check)
+            _run_pair(comm, stream, scene, (system, q0, pair), job, (i == 0, i + 1 < len(jobs)), bar, check)
         w0 = time.perf_counter()
         stream.drain()
         ends = comm.gather(time.perf_counter() - w0, root=0)
@@ -456,87 +456,100 @@ def _finish(path, scene, opened, timings) -> list:
     return summaries
 
 
-def _run_pair(comm, stream, scene, system, q0, pair_, job, first, has_next, bar, check):
+def _run_pair(comm, stream, scene, inputs, job, place, bar, check):
     """Advance one pair on this rank from its start (or checkpoint) to scene.steps, handing each
-    batch of outputs to ``stream``; the pair's tasks and rows may finish during the next pair."""
-    rank, size = comm.rank, comm.size
-    n, h = q0.shape[0], scene.h
-    name = pair_.name
-    start_step, saved = job.start, job.state
-    make_engine, s_tab = _engine_maker(scene, system, pair_)
-    engine = make_engine()
-    clock = pair_clock()
-    w0 = time.perf_counter()
-    if first:                                  # the run's first pair: an even split, batches from its first interval
-        plan = (comm.bcast(split(n, size) if rank == 0 else None, root=0), None, None)
-    else:
-        plan = stream.planner.receive(rank, stream.transport)
-    clock["wait_plan"] = clock["gather"] = time.perf_counter() - w0
-    blocks, batch, cadence = plan
-    lo, hi = blocks[rank]
-    st = _starting_state(comm, engine, q0, blocks, saved, s_tab, h)
-    t_start = time.perf_counter()
-    pair = _Pair(name=name, block=(lo, hi), diagnostics=Diagnostics(scene, system, q0[lo:hi]), clock=clock,
-                 batch=batch or 1, cadence=cadence or 1, t_start=t_start, spent0=stream.spent.snapshot(),
-                 start=start_step, middle=(start_step + scene.steps) // 2,
-                 refiners={spec.name: Refiner(spec, make_engine, scene.base, h, scene.output_every, check)
-                           for spec, _ in scene.sample_sets if spec.levels})
-    if rank == 0:
-        pair.g = output.pair_group(stream.writer.f, name)
-        wall0 = output.wall_clock(pair.g)
-        pair.wall = lambda: wall0 + (pair.t_end or time.perf_counter()) - t_start
-    final = last_checkpoint_step(scene.steps, scene.output_every)
-    if start_step < scene.steps:   # the output at the start (a resume's checkpoint row was dropped: same bits)
-        stream.take(pair, st, start_step, checkpoint=False, flush=False)
-    measured = []
-
-    def first_interval():
-        """Rank 0's first interval sets the batches and how often the state is written (at the
-        pair's end when this run of the pair holds no whole interval)."""
-        w0 = time.perf_counter()
-        per_output = w0 - t_start
-        measured.append(per_output)
-        cap = turns(scene.n_outputs * len(scene.pairs), size)
-        if batch is None:
-            pair.batch, pair.cadence = comm.bcast(
-                (min(_batch(per_output, hi - lo), cap), _cadence(per_output, scene.checkpoint_seconds))
-                if rank == 0 else None, root=0)
-        if rank == 0 and has_next:     # sent from about the pair's middle (ranks.Planner)
-            stream.planner.next_pair = (n, min(_batch(per_output, hi - lo), cap),
-                                        _cadence(per_output, scene.checkpoint_seconds))
-        stream.spent.charge(clock, "gather", time.perf_counter() - w0)
-
-    def checkpoint_at(step, j):
-        return j % pair.cadence == 0 or step == final
-
-    def on_output(step, out=None):
-        """The output at ``step``: of the state, or of an engine.Output taken inside a longer call."""
-        j = (step - start_step) // scene.output_every
-        if j == 1:
-            first_interval()
-        if step < scene.steps:    # the last output is taken below, once the pair's advance is on its clock
-            stream.take(pair, st if out is None else out, step, checkpoint=checkpoint_at(step, j),
-                        flush=j % pair.batch == 0)
-
-    def light(step):
-        """Whether the output at ``step`` needs no more than q, p, Λ, live and breakdown times: not the
-        first interval's end (rank 0 times it), not a checkpoint, not the pair's end."""
-        j = (step - start_step) // scene.output_every
-        return j > 1 and step < scene.steps and not checkpoint_at(step, j)
-
-    done = [start_step]
+    batch of outputs to ``stream``; the pair's tasks and rows may finish during the next pair.
+    ``inputs``: (system, q0, the scene's pair); ``place``: (whether it is the run's first pair, whether
+    another follows)."""
+    run = _PairRun(comm, stream, scene, inputs, job, place, check)
+    clock = run.pair.clock
+    done = [run.start]
 
     def progress(step):
-        if rank == 0:
-            bar.update(step - done[0], name)
+        if comm.rank == 0:
+            bar.update(step - done[0], run.pair.name)
         done[0] = step
 
-    clock["advance"] += march(engine, st, start_step, scene.steps, scene.output_every, on_output, progress,
-                              check, light=light)
-    if not measured:
-        first_interval()
-    stream.take(pair, st, scene.steps, checkpoint=scene.steps == final, flush=True, last=True)
-    pair.t_end = time.perf_counter()
+    clock["advance"] += march(run.engine, run.st, run.start, scene.steps, scene.output_every,
+                              Hooks(run.on_output, progress, check, run.light))
+    if not run.measured:
+        run.first_interval()
+    stream.take(run.pair, run.st, scene.steps, checkpoint=scene.steps == run.final, flush=True, last=True)
+    run.pair.t_end = time.perf_counter()
+
+
+class _PairRun:
+    """One pair's advance on this rank: its engine and state, its :class:`_Pair` record, and what the
+    time loop calls back at outputs (:meth:`on_output`, :meth:`light`)."""
+
+    def __init__(self, comm, stream, scene, inputs, job, place, check):
+        system, q0, pair_ = inputs
+        first, self.has_next = place
+        self.comm, self.stream, self.scene = comm, stream, scene
+        rank, size, h = comm.rank, comm.size, scene.h
+        self.n, self.start = q0.shape[0], job.start
+        make_engine, s_tab = _engine_maker(scene, system, pair_)
+        self.engine = make_engine()
+        clock = pair_clock()
+        w0 = time.perf_counter()
+        if first:                              # the run's first pair: an even split, batches from its first interval
+            plan = (comm.bcast(split(self.n, size) if rank == 0 else None, root=0), None, None)
+        else:
+            plan = stream.planner.receive(rank, stream.transport)
+        clock["wait_plan"] = clock["gather"] = time.perf_counter() - w0
+        blocks, self.batch, cadence = plan
+        self.lo, self.hi = blocks[rank]
+        self.st = _starting_state(comm, self.engine, q0, blocks, job.state, s_tab, h)
+        self.t_start = t_start = time.perf_counter()
+        self.pair = pair = _Pair(
+            name=pair_.name, block=(self.lo, self.hi), diagnostics=Diagnostics(scene, system, q0[self.lo:self.hi]),
+            clock=clock, batch=self.batch or 1, cadence=cadence or 1, t_start=t_start,
+            spent0=stream.spent.snapshot(), start=self.start, middle=(self.start + scene.steps) // 2,
+            refiners={spec.name: Refiner(spec, make_engine, scene.base, h, scene.output_every, check)
+                      for spec, _ in scene.sample_sets if spec.levels})
+        if rank == 0:
+            pair.g = output.pair_group(stream.writer.f, pair.name)
+            wall0 = output.wall_clock(pair.g)
+            pair.wall = lambda: wall0 + (pair.t_end or time.perf_counter()) - t_start
+        self.final = last_checkpoint_step(scene.steps, scene.output_every)
+        if self.start < scene.steps:   # the output at the start (a resume's checkpoint row was dropped: same bits)
+            stream.take(pair, self.st, self.start, checkpoint=False, flush=False)
+        self.measured = []
+
+    def first_interval(self):
+        """Rank 0's first interval sets the batches and how often the state is written (at the
+        pair's end when this run of the pair holds no whole interval)."""
+        comm, scene, pair = self.comm, self.scene, self.pair
+        w0 = time.perf_counter()
+        per_output = w0 - self.t_start
+        self.measured.append(per_output)
+        cap = turns(scene.n_outputs * len(scene.pairs), comm.size)
+        if self.batch is None:
+            pair.batch, pair.cadence = comm.bcast(
+                (min(_batch(per_output, self.hi - self.lo), cap), _cadence(per_output, scene.checkpoint_seconds))
+                if comm.rank == 0 else None, root=0)
+        if comm.rank == 0 and self.has_next:     # sent from about the pair's middle (ranks.Planner)
+            self.stream.planner.next_pair = (self.n, min(_batch(per_output, self.hi - self.lo), cap),
+                                             _cadence(per_output, scene.checkpoint_seconds))
+        self.stream.spent.charge(pair.clock, "gather", time.perf_counter() - w0)
+
+    def _checkpoint_at(self, step, j):
+        return j % self.pair.cadence == 0 or step == self.final
+
+    def on_output(self, step, out=None):
+        """The output at ``step``: of the state, or of an engine.Output taken inside a longer call."""
+        j = (step - self.start) // self.scene.output_every
+        if j == 1:
+            self.first_interval()
+        if step < self.scene.steps:    # the last output is taken below, once the pair's advance is on its clock
+            self.stream.take(self.pair, self.st if out is None else out, step,
+                             checkpoint=self._checkpoint_at(step, j), flush=j % self.pair.batch == 0)
+
+    def light(self, step):
+        """Whether the output at ``step`` needs no more than q, p, Λ, live and breakdown times: not the
+        first interval's end (rank 0 times it), not a checkpoint, not the pair's end."""
+        j = (step - self.start) // self.scene.output_every
+        return j > 1 and step < self.scene.steps and not self._checkpoint_at(step, j)
 
 
 def _engine_maker(scene, system, pair):

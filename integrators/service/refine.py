@@ -30,7 +30,7 @@ import numpy as np
 
 from invariants.samples import first_level
 
-from ..engine import march
+from ..engine import Hooks, march
 
 
 class Refiner:
@@ -62,7 +62,7 @@ class Refiner:
             raise RuntimeError(f"refinement asked for step {step} after step {at}: outputs out of order")
         if step > at:
             t0 = time.perf_counter()
-            march(eng, st, at, step, self.every, check=self.check)
+            march(eng, st, at, step, self.every, Hooks(check=self.check))
             self.seconds += time.perf_counter() - t0
             self.point_steps += (step - at) * st.q.shape[0]
             self.levels[level][2] = step

@@ -45,8 +45,15 @@ FIELDS = ("q", "p", "Lam", "q_comp", "p_comp", "Y", "mu", "live", "iterations", 
 
 
 def previous_kernel(rev):
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:integrators/kernel.py"], capture_output=True,
-                         text=True, check=True).stdout
+    """The scalar kernel at ``rev`` as a module.  It was one file, integrators/kernel.py, up to the
+    kernel's split into integrators/kernel/ (the study compares with the kernel the lanes replaced,
+    0581e1c, which drives its own argument list): a revision without that file is refused in one line."""
+    got = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:integrators/kernel.py"], capture_output=True,
+                         text=True)
+    if got.returncode != 0:
+        raise SystemExit(f"--previous {rev}: no integrators/kernel.py there (the study reads the one-file scalar "
+                         "kernel the lanes replaced, such as 0581e1c)")
+    src = got.stdout
     folder = Path(tempfile.mkdtemp())
     (folder / "previous_kernel.py").write_text(src)
     spec = importlib.util.spec_from_file_location("previous_kernel", folder / "previous_kernel.py")

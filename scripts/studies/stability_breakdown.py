@@ -65,7 +65,7 @@ def summary(name, steps_list, total):
 def compiled_breakdown(system, name, q, h, steps, tolerances, every=1000):
     """(breakdown step or None, max |ΔH|/|H₀| over the outputs) of unprojected ``name`` on the compiled
     engine with Newton's ``tolerances`` (outputs every ``every`` steps)."""
-    from integrators.engine import Engine, march
+    from integrators.engine import Engine, Hooks, march
     engine = Engine(system, integrators.tableau(name), "none", h, tolerances=tolerances)
     st = engine.state(q)
     H0, worst = system.H(q)[0], [0.0]
@@ -79,7 +79,7 @@ def compiled_breakdown(system, name, q, h, steps, tolerances, every=1000):
             raise StopIteration
 
     try:
-        march(engine, st, 0, steps, every, on_output, check=check)
+        march(engine, st, 0, steps, every, Hooks(on_output, check=check))
     except StopIteration:
         pass
     broke = None if st.live[0] else int(round(st.breakdown_time[0] / h))
