@@ -71,7 +71,7 @@ def test_a_toy_post_projection_runs_through_the_table_and_one_function(with_rese
 
 _AGAIN = """
 import sys, numpy as np
-sys.path.insert(0, {tests!r})
+sys.path[:0] = [{root!r}, {tests!r}]
 import integrators
 from integrators import codegen
 from test_projections import RESET, _vortices
@@ -83,16 +83,20 @@ print(sum(entry.stats.cache_hits.values()), sum(entry.stats.cache_misses.values(
 
 
 @pytest.mark.slow                               # the first call compiles the toy's kernel (a few minutes)
-def test_a_post_term_of_ones_own_is_compiled_once_per_machine():
+def test_a_post_term_of_ones_own_is_compiled_once_per_machine(tmp_path):
     """The toy's kernel compiled here is cached: another process that runs the same post term loads it
-    (one cache hit, no compilation) and gives the same bits."""
+    (one cache hit, no compilation) and gives the same bits.  The child imports the package this
+    process runs (an installed copy and a checkout are different code: their keys differ) and starts
+    in an empty folder, so that a checkout in the working folder does not shadow it."""
     import os
     import subprocess
     import sys
     sy, q0 = _vortices(3)
     sol = integrators.integrate(sy, q0, tableau="GLRK2", projection=RESET, h=0.1, steps=12)
-    out = subprocess.run([sys.executable, "-c", _AGAIN.format(tests=os.path.dirname(__file__))],
-                         capture_output=True, text=True, check=True).stdout.split()
+    code = _AGAIN.format(root=os.path.dirname(os.path.dirname(os.path.abspath(integrators.__file__))),
+                         tests=os.path.dirname(os.path.abspath(__file__)))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=tmp_path).stdout.split()
     assert out == ["1", "0", sol.q.tobytes().hex()]
 
 
