@@ -250,6 +250,7 @@ class State:
 
 
 FIXED_TOL = 4 * np.finfo(np.float64).eps   # a fixed Newton tolerance of 4 ulps: faster, and its round-off drifts (docs/brouwer.md)
+DITHER = 2.0 ** -45                         # Tolerances.dither: iterates after larger updates rounded to 64 ulps of scale
 
 
 @dataclasses.dataclass(frozen=True)
@@ -315,13 +316,22 @@ class Tolerances:
         recurrence fitted to the last DEPTH defects, whose prediction competes with the
         polynomial orders (``"defects"`` only; :func:`integrators.kernel._recurrence`): it follows
         uniform rotations and the parasitic two-step wiggles that the polynomials follow poorly
+    dither : round the guess, and each Newton iterate reached by an update larger than 2⁻⁴⁵
+        (relative, like tol), to a grid of 64 ulps of its scale, so that Newton's last iterations
+        approach the solution from a side that changes from step to step rather than the side the
+        guess comes from (default True; double unknowns only: not the audit's complex-step values,
+        not double-double).  Without it the round-off of some pairs drifted although every step
+        iterates to its floor: point vortices GLRK3-symplectic over 64 starts, energy exponent
+        0.72 ± 0.03 with mean/RMS +0.85, and 0.56 ± 0.03, −0.15 with it, for 0.9 more iterations
+        a step (docs/brouwer.md; :func:`integrators.kernel.newton._update`)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
 
-    ``Tolerances(predictor="extrapolate", tol=FIXED_TOL)`` is the polynomial guess alone at a fixed
-    tolerance and ``Tolerances(tol=FIXED_TOL)`` the defects' guess at a fixed tolerance, bitwise the
-    rules docs/benchmarks-history.md compares.
+    ``Tolerances(predictor="extrapolate", tol=FIXED_TOL, dither=False)`` is the polynomial guess alone
+    at a fixed tolerance and ``Tolerances(tol=FIXED_TOL, dither=False)`` the defects' guess at a fixed
+    tolerance, bitwise the rules docs/benchmarks-history.md compares; ``Tolerances(dither=False)`` the
+    default before the dithered approach.
     """
 
     tol: float = 0.0
@@ -340,6 +350,7 @@ class Tolerances:
     jacobian_age: int = 1
     jacobian_every: int = 1
     recurrence: int = 4
+    dither: bool = True
 
     def __post_init__(self):
         if self.predictor not in PREDICTORS:
@@ -368,6 +379,8 @@ class Tolerances:
         if isinstance(self.refresh_horizon, bool) or not isinstance(self.refresh_horizon, (int, np.integer)) \
                 or not -1 <= self.refresh_horizon <= 64:
             raise ValueError(f"Tolerances.refresh_horizon must be an integer from -1 to 64, got {self.refresh_horizon!r}")
+        if not isinstance(self.dither, (bool, np.bool_)):
+            raise ValueError(f"Tolerances.dither must be True or False, got {self.dither!r}")
         if isinstance(self.maxiter, bool) or not isinstance(self.maxiter, (int, np.integer)) or self.maxiter < 1:
             raise ValueError(f"Tolerances.maxiter must be a positive integer, got {self.maxiter!r}")
 
@@ -396,7 +409,8 @@ class Tolerances:
                       age=float(self.jacobian_age), every=float(self.jacobian_every),
                       least=2.0 if defects else 1.0, rec=float(self.recurrence) if defects else 0.0,
                       carry=max(self.trust_floor, self.refresh_floor) * scale if defects else 0.0,
-                      fine=64 * np.finfo(np.float64).eps * scale)
+                      fine=64 * np.finfo(np.float64).eps * scale,
+                      dither=DITHER if self.dither and not double_double else 0.0)
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 

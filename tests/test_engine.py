@@ -296,9 +296,11 @@ def test_one_specialisation_names_what_a_call_compiles():
     scale = 2.0 ** -104 / np.finfo(float).eps
     from integrators.kernel import Newton
     scaled = [Newton._fields.index(n) for n in ("tol", "stall", "floor", "carry", "fine")]
-    same = [i for i in range(len(Newton._fields)) if i not in scaled]
+    dither = Newton._fields.index("dither")        # the dithered approach: double unknowns only
+    same = [i for i in range(len(Newton._fields)) if i not in scaled and i != dither]
     assert np.array_equal(spec.newton[scaled], real.newton[scaled] * scale)
     assert np.array_equal(spec.newton[same], real.newton[same])
+    assert real.newton[dither] == 2.0 ** -45 and spec.newton[dither] == 0.0
     with pytest.raises(ValueError, match="lanes must be 1 or 8"):
         dd._specialise(dd.state(q), lanes=16)
 

@@ -161,7 +161,7 @@ def layout(s, d, nz):
 
 
 Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age every least rec "
-                               "carry fine")
+                               "carry fine dither")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
@@ -178,7 +178,9 @@ starts its Newton from a Jacobian at the guess instead of the factors carried fr
 ``every`` (so the lanes of a group take theirs together); a lane converges at its ``least``-th
 iteration at the earliest (2 with the defects: the guess itself is never the solution); ``rec``
 coefficients (0: none) of the defects' fitted linear recurrence (:func:`_recurrence`); an update of at most
-``fine`` (64 ulps of the number type) that stops halving is at the round-off floor (:func:`_judge`)."""
+``fine`` (64 ulps of the number type) that stops halving is at the round-off floor (:func:`_judge`);
+an iterate reached by an update larger than ``dither`` (> 0; double unknowns only) is rounded to a grid
+of about that size (:func:`_update`)."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
                                         "lu piv have_lu jac_z jac_q jac_lam defects orders")

@@ -26,10 +26,10 @@ from __future__ import annotations
 
 from .lanetypes import DDLanePtr, DDVec, LanePtr, Mask, Vec
 from .pointers import _at, at, ddv, elem, elem3, lanes, ld, ldi, lget, lset, nlanes, plain, put, put3, st, sti
-from .values import is_complex, raw, re, step_measure, _vget, _vset
+from .values import dithers, is_complex, raw, re, step_measure, _vget, _vset
 from .masks import anyl, lmask, mand, mnot, mor, sel
 from . import dd  # noqa: F401  (registers the double-double lane arithmetic)
 
-__all__ = ['anyl', '_at', 'at', 'DDLanePtr', 'ddv', 'DDVec', 'elem', 'elem3', 'is_complex', 'LanePtr',
+__all__ = ['anyl', '_at', 'at', 'DDLanePtr', 'ddv', 'DDVec', 'dithers', 'elem', 'elem3', 'is_complex', 'LanePtr',
            'lanes', 'ld', 'ldi', 'lget', 'lmask', 'lset', 'mand', 'Mask', 'mnot', 'mor', 'nlanes', 'plain',
            'put', 'put3', 'raw', 're', 'sel', 'st', 'step_measure', 'sti', 'Vec', '_vget', '_vset']

@@ -241,6 +241,12 @@ def step_measure(r, scale, cs):
     """|r|/scale; for a complex-step value also |Im r|/(cs·scale), the derivative's own measure."""
 
 
+def dithers(p):
+    """Whether a pointer's data are plain doubles (a compile-time constant): the unknowns whose Newton
+    iterates are rounded to a grid (:func:`integrators.kernel.newton._update`); not complex-step
+    values, not double-doubles."""
+
+
 @intrinsic
 def _lp_raw(typingctx, p):
     if not isinstance(p, LanePtr):
@@ -273,6 +279,12 @@ def _re(x):
 @overload(is_complex, inline="never")
 def _is_complex(p):
     c = isinstance(p.dtype, types.Complex)
+    return lambda p: c
+
+
+@overload(dithers, inline="never")
+def _dithers(p):
+    c = isinstance(p, (LanePtr, types.CPointer)) and p.dtype == types.float64
     return lambda p: c
 
 

@@ -59,10 +59,11 @@ BOOTSTRAP = 200
 SAMPLES = 40              # log-spaced samples of the RMS series the fit uses
 EXPONENT_BOUND = 0.55     # issue 70: every pair at most this
 # the engine a rows file was measured with (written into the file); a file without it is older
-ENGINE = "2026-11-29: the increments summed exactly (kernel._weighted_sum)"
+ENGINE = "2026-11-30: the dithered approach (Tolerances.dither)"
+SUMS = "2026-11-29: the increments summed exactly (kernel._weighted_sum)"
 EXACT_POINTS = "2026-11-29: the equations see their points exactly (kernel.exact_points)"
 OLDER = "2026-11-28: before the exact points"
-MARKS = {ENGINE: "", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
+MARKS = {ENGINE: "", SUMS: " †", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
 NEGLIGIBLE = 1e-19        # a truncation part below this: the reference is H(q₀) (no double-double run)
 COUPLING_MAX = 0.01       # the round-off part δE moves the phase by ~δE·T (frequencies ~ 1 here), which
                           # moves a truncation error of size e by ~e·δE·T: e·T at most this, so that
@@ -84,8 +85,8 @@ EXTRA_RULES = {}          # --rule NAME=JSON: more Tolerances, run over the whol
 def rules():
     return {**{name: integrators.Tolerances(**kw) for name, kw in EXTRA_RULES.items()},
             "now": integrators.Tolerances(),
-            "fixed": integrators.Tolerances(tol=FIXED_TOL),
-            "extrapolate": integrators.Tolerances(predictor="extrapolate", tol=FIXED_TOL)}
+            "fixed": integrators.Tolerances(tol=FIXED_TOL, dither=False),
+            "extrapolate": integrators.Tolerances(predictor="extrapolate", tol=FIXED_TOL, dither=False)}
 
 
 def pendulum(n):
@@ -291,7 +292,8 @@ def merged(docs):
 
 def markdown(rows):
     """The table of docs/brouwer.md: one line per pair, the three rules side by side; a pair measured
-    with an older engine than ENGINE is marked (MARKS: † the exact points' engine, ‡ the one before),
+    with an older engine than ENGINE is marked (MARKS: † the exact sums' engine (or the exact points'
+    before it), ‡ the engine before those),
     and a pair re-measured shows the older engine's exponent and iterations (now) beside."""
     lines = ["| system | pair | h | steps | reference (truncation) | it./step: now · fixed · extrapolate | "
              "exponent now | fixed | extrapolate | now, the engine before (it./step) | "

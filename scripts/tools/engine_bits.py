@@ -1,6 +1,6 @@
 """The compiled engine's results and speed, for comparing two versions of the kernel side by side.
 
-    python scripts/tools/engine_bits.py dump FILE.npz [PREDICTOR]   # every admissible pair on three systems, 15 steps
+    python scripts/tools/engine_bits.py dump FILE.npz [PREDICTOR | undithered]   # every admissible pair on three systems, 15 steps
     python scripts/tools/engine_bits.py compare A.npz B.npz
     python scripts/tools/engine_bits.py speed              # point-steps/s, 10^4 points, 1 thread, best of 3
 
@@ -21,8 +21,10 @@ from integrators.projections import admission
 
 def dump(path, predictor=None):
     """``predictor``: Tolerances.predictor (None: the default); "extrapolate" gives the bits of the
-    engine before issue 55, to compare with a dump made there."""
-    tol = integrators.Tolerances() if predictor is None else integrators.Tolerances(predictor=predictor)
+    engine before issue 55, to compare with a dump made there; "undithered" the default rule without
+    the dithered approach (``Tolerances(dither=False)``), the engine's bits before it."""
+    tol = integrators.Tolerances() if predictor is None else integrators.Tolerances(dither=False) \
+        if predictor == "undithered" else integrators.Tolerances(predictor=predictor)
     out = {}
     cases = (("guiding_centre_symmetric", 10.0, invariants.loop("guiding_centre", 64)),
              ("point_vortices", 0.1, np.array([[1, 0.1, 1, -0.1]])
