@@ -253,7 +253,8 @@ def cases(args):
                 h = float(system.defaults["h"])
                 for tab in DEGENERATE_TABLEAUS:
                     for proj in DEGENERATE_PROJECTIONS:
-                        yield system, q0, tab, proj, h, args.degenerate_steps
+                        if args.degenerate_pairs is None or f"{name}:{tab}:{proj}" in args.degenerate_pairs:
+                            yield system, q0, tab, proj, h, args.degenerate_steps
         else:
             raise SystemExit(f"error: unknown case '{case}'; choose pendulum, kepler or degenerate")
 
@@ -369,6 +370,8 @@ def main(argv=None):
     ap.add_argument("--degenerate-starts", type=int, default=32)
     ap.add_argument("--degenerate-systems", type=lambda s: s.split(","), default=list(DEGENERATE),
                     help="which of the degenerate systems (comma-separated; default all three)")
+    ap.add_argument("--degenerate-pairs", type=lambda s: s.split(","), default=None,
+                    help="only these degenerate pairs, SYSTEM:TABLEAU:PROJECTION,... (default: every pair)")
     ap.add_argument("--probe", type=int, default=20_000, help="steps of the double-double run that decides "
                     "whether the truncation part is negligible")
     ap.add_argument("--every", type=int, default=1000, help="output cadence in steps")
