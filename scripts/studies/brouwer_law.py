@@ -84,7 +84,7 @@ EXTRA_RULES = {}          # --rule NAME=JSON: more Tolerances, run over the whol
 
 def rules():
     return {**{name: integrators.Tolerances(**kw) for name, kw in EXTRA_RULES.items()},
-            "now": integrators.Tolerances(),
+            "now": integrators.Tolerances(dither=True),      # (the dithered approach; not the default yet)
             "fixed": integrators.Tolerances(tol=FIXED_TOL, dither=False),
             "extrapolate": integrators.Tolerances(predictor="extrapolate", tol=FIXED_TOL, dither=False)}
 
