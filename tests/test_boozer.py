@@ -190,6 +190,16 @@ def test_system_field_is_the_fourier_sum(circular_system):
     assert np.max(np.abs(B / bz.modB(s, th, ze) - 1)) < 1e-5
 
 
+def near_axis(sy):
+    """Eight trapped guiding centres on a circle of radius 0.02 r₁ about the axis of the circular
+    tokamak and one on the axis itself (the default trapped orbit's ρ), and r₁."""
+    r1 = np.sqrt(2 * sy.boozer.psi0)
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    rho = sy.defaults["trapped"][3]
+    return np.vstack([np.stack([0.02 * r1 * np.cos(ang), 0.02 * r1 * np.sin(ang), 0 * ang, rho + 0 * ang], 1),
+                      [0.0, 0.0, 0.0, rho]]), r1
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("tableau,projection", [("GLRK2", "standard"), ("GLRK2", "symmetric"), ("GLRK4", "symmetric")])
 def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_system, tableau, projection):
@@ -201,13 +211,9 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
     GLRK4-symmetric were steps whose Newton stopped short of the floor, test below); the axis
     family's energy too (measured ≤ 5.4e-14; the passing orbit's energy error is the method's
     truncation, 1.1e-9 for GLRK2)."""
-    sy, bz = circular_system, circular_system.boozer
-    d = sy.defaults
-    r1 = np.sqrt(2 * bz.psi0)
-    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    rho = d["trapped"][3]
-    q0 = np.vstack([np.stack([0.02 * r1 * np.cos(ang), 0.02 * r1 * np.sin(ang), 0 * ang, rho + 0 * ang], 1),
-                    [0.0, 0.0, 0.0, rho], d["q0"], d["trapped"]])
+    sy, d = circular_system, circular_system.defaults
+    q0, r1 = near_axis(sy)
+    q0 = np.vstack([q0, d["q0"], d["trapped"]])
     sol = integrators.integrate(sy, q0, tableau=tableau, projection=projection, h=d["h"], steps=4000, save_every=20)
     assert np.isinf(sol.breakdown_time).all()
     E = np.stack([sy.H(sol.q[:, i]) for i in range(len(q0))])
@@ -217,6 +223,23 @@ def test_axisymmetric_file_keeps_momentum_and_energy_through_the_axis(circular_s
     assert np.max(np.abs(E[:9] / E[:9, :1] - 1)) < 5e-13
     r = np.hypot(sol.q[..., 0], sol.q[..., 1])
     assert r[:, :8].min() < 0.005 * r1                      # the family does come close to the axis
+
+
+@pytest.mark.slow
+def test_dithered_newton_stops_at_the_floor_near_the_axis(circular_system):
+    """The dithered approach (Tolerances(dither=True)) rounds Newton's guess and iterates to 64 ulps
+    of their scale, 1 for x, y ≈ 0.004 near the axis: thousands of their own ulps.  Its first
+    version's floor test took updates within 64 ulps on carried factors that contracted by 0.5-0.8
+    for the floor and stopped there, and single steps moved P_ζ by 70-90 ulps: 1.3e-12 over the
+    4,000 steps of the test above (GLRK2-symmetric, its eight near-axis orbits and the one on the
+    axis).  The strict floor test keeps it to round-off (measured 5.7e-15; 5.8e-15 undithered)."""
+    sy, d = circular_system, circular_system.defaults
+    q0, _ = near_axis(sy)
+    sol = integrators.integrate(sy, q0, tableau="GLRK2", projection="symmetric", h=d["h"], steps=4000, save_every=20,
+                                tolerances=integrators.Tolerances(dither=True))
+    assert np.isinf(sol.breakdown_time).all()
+    P = np.stack([sy.momentum(sol.q[:, i]) for i in range(len(q0))])
+    assert (np.abs(P - P[:, :1]).max(1) / np.abs(P[:, 0])).max() < 1e-13
 
 
 @pytest.mark.slow

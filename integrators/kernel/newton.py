@@ -34,6 +34,21 @@ def _note_jacobian(z, stale, nz, d, w, S):
         st(jl, m, sel(stale, ld(lam, m), ld(jl, m)))
 
 
+ROUNDS = 2       # the dithered approach: at most this many of a solve's updates are rounded (_update)
+CRAWL = 0.8      # ... and within 64 ulps its carried factors are refreshed only above this contraction (_judge)
+
+
+@njit(inline='always', **_OPTS)
+def _to_grid(z, scale, nz, mask, dither):
+    """The lanes ``mask`` of z rounded to a grid of ulp(c), c = dither·2⁵¹·scale per unknown:
+    (z + c) − c, exact, a move of at most half that grid (32 ulps of scale for 2⁻⁴⁵)."""
+    k = dither * 2.0 ** 51
+    for i in range(nz):
+        zi = ld(z, i)
+        c = ld(scale, i) * k
+        st(z, i, sel(mask, (zi + c) - c, zi))
+
+
 @njit(inline='always', **_OPTS)
 def _update(z, r, done, scale, nz, f, F, dither):
     """z −= δ (r holds −δ) in the lanes not done; per lane the update's size max |δ|/scale
@@ -50,8 +65,9 @@ def _update(z, r, done, scale, nz, f, F, dither):
     side step after step, and the round-off drifted (point vortices GLRK3-symplectic over 64
     starts, the energy exponent 0.72 ± 0.03 with mean/RMS +0.85; docs/brouwer.md).  The grid's
     offset from the solution changes from step to step like a random number, so the side does
-    too: the same pair then reads 0.56 ± 0.03, mean/RMS −0.15, for 0.9 more iterations a step.
-    Bitwise the same in every lane and on the scalar path (one add and one subtract a value)."""
+    too.  At most ROUNDS updates a solve are rounded; ``F.rounded`` marks a lane whose iterate was
+    (:func:`_judge` does not take the update that follows for the floor).  Bitwise the same in every
+    lane and on the scalar path (one add and one subtract a value)."""
     size = sel(done, 0.0, 0.0)
     nan = done
     finite = mnot(done)
@@ -64,19 +80,17 @@ def _update(z, r, done, scale, nz, f, F, dither):
         size = sel(v > size, v, size)
         finite = mand(finite, np.isfinite(zi))
     if dithers(z) and dither > 0.0:
-        big = mand(mnot(done), size > dither)
-        k = dither * 2.0 ** 51
-        for i in range(nz):
-            zi = ld(z, i)
-            c = ld(scale, i) * k
-            st(z, i, sel(big, (zi + c) - c, zi))
+        big = mand(mand(mnot(done), size > dither), ld(f, F.rounds) < ROUNDS)
+        _to_grid(z, scale, nz, big, dither)
+        st(f, F.rounded, sel(big, 1.0, 0.0))
+        st(f, F.rounds, ld(f, F.rounds) + sel(big, 1.0, 0.0))
     st(f, F.norm, size)
     st(f, F.nan, sel(nan, 1.0, 0.0))
     st(f, F.finite, sel(finite, 1.0, 0.0))
 
 
 @njit(inline='always', **_OPTS)
-def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
+def _judge(f, F, cfg, stall, off, strict):
     """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol, or
     ≤ fine² (an update of 10⁻²⁸ of its coordinate, far below what even the compensation term of q
     holds: there is nothing left to halve), or ≤ stall once the update stops halving: within ``fine`` (64 ulps), or wherever the
@@ -94,14 +108,24 @@ def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
     largest waste on high-order pairs, docs/benchmarks.md) and θ^horizon·|δ| > tol: the factors
     would not converge within ``horizon`` more iterations, about what a Jacobian costs in
     iterations plus the two it takes after (``horizon`` 0: the first two tests alone).  Written
-    with masks and selects, so W lanes are judged at once (the same comparisons and the one division of the scalar path, lane by lane)."""
+    with masks and selects, so W lanes are judged at once (the same comparisons and the one division of the scalar path, lane by lane).
+
+    ``strict`` (the dithered approach, whose roundings put an iterate up to 32 ulps of its scale
+    off on purpose): an update within ``fine`` is the floor only after a fresh Jacobian or once it
+    no longer shrinks at all (θ ≥ 1), never the update taken at a rounded iterate (``off``), and
+    within ``fine`` the carried factors are refreshed only where θ > 0.8.  Without it a lane on
+    carried factors contracting by 0.5-0.8 stopped 32 ulps of its scale from the solution: P_ζ of
+    near-axis Boozer orbits moved by 70-90 ulps in single steps (tests/test_boozer.py)."""
+    tol, fine, refresh, floor, horizon, least = cfg.tol, cfg.fine, cfg.refresh, cfg.floor, cfg.horizon, cfg.least
     on = ld(f, F.done) == 0.0
     st(f, F.its, ld(f, F.its) + sel(on, 1.0, 0.0))
     sz, prev = ld(f, F.norm), ld(f, F.prev)
     failed = mor(mor(ld(f, F.nan) != 0.0, ld(f, F.finite) == 0.0), mnot(np.isfinite(sz)))
     theta = sel(np.isfinite(prev), sz / prev, np.inf)
     slow = mand(np.isfinite(theta), theta > 0.5)
-    floored = mor(mand(mand(sz <= stall, slow), mor(ld(f, F.exact) != 0.0, sz <= fine)), sz <= fine * fine)
+    near = mand(sz <= fine, theta >= 1.0) if strict else sz <= fine
+    floored = mor(mand(mand(mand(sz <= stall, slow), mor(ld(f, F.exact) != 0.0, near)), mnot(off)),
+                  sz <= fine * fine)
     converged = mand(mand(mnot(failed), mor(sz <= tol, floored)), ld(f, F.its) >= least)
     ends = mand(on, mor(failed, converged))
     goes = mand(on, mnot(ends))
@@ -113,6 +137,8 @@ def _judge(f, F, tol, stall, fine, refresh, floor, horizon, least):
         for _ in range(int(horizon)):
             left = left * theta
     tired = mand(mand(np.isfinite(theta), theta > refresh), mand(mor(sz > floor, slow), left > tol))   # slow: not floored
+    if strict:                                   # within the fine band the carried factors go on unless they crawl
+        tired = mand(tired, mor(sz > fine, theta > CRAWL))
     st(f, F.exact, sel(goes, ld(f, F.stale), ld(f, F.exact)))     # this iteration's: the next one's judge
     st(f, F.stale, sel(goes, sel(tired, 1.0, 0.0), ld(f, F.stale)))
     st(f, F.prev, sel(goes, sz, prev))
@@ -144,7 +170,6 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     LU, piv, known = factors
     W = nlanes(z)           # (mode and nz arrive as runtime ints: a literal would compile this twice)
     w, S, f, F, ip, IP, cfg = g.w, g.S, g.f, g.F, g.ip, g.IP, P.cfg
-    tol, refresh = cfg.tol, cfg.refresh
     active = ld(f, F.active) != 0.0
     st(f, F.done, sel(active, 0.0, 1.0))
     st(f, F.ok, 0.0)
@@ -155,12 +180,10 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     scale = at(f, F.scale if mode == MODE_MAIN else F.pscale)
     Jt = at(w, S.Jt if mode == MODE_MAIN else S.pJ)
     pivt = at(ip, IP.pivt)
+    st(f, F.rounded, 0.0)
+    st(f, F.rounds, 0.0)
     if dithers(z) and cfg.dither > 0.0:          # the guess too: with the defects' recurrence it is often
-        k = cfg.dither * 2.0 ** 51               # within the floor already, and its side is the history's
-        for i in range(nz):
-            zi = ld(z, i)
-            c = ld(scale, i) * k
-            st(z, i, sel(active, (zi + c) - c, zi))
+        _to_grid(z, scale, nz, active, cfg.dither)   # within the floor already, and its side is the history's
     for _ in range(int(cfg.maxiter)):
         done = ld(f, F.done) != 0.0
         if not anyl(mnot(done)):
@@ -186,9 +209,9 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
                 st(f, F.age, sel(stale, 0.0, ld(f, F.age)))
         lu_solve(LU, piv, r, nz)                  # r is now −δ
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
+        off = ld(f, F.rounded) != 0.0             # this update was taken at a rounded iterate
         _update(z, r, done, scale, nz, f, F, cfg.dither)
-        _judge(f, F, tol, cfg.stall_complex if is_complex(z) else cfg.stall, cfg.fine, refresh, cfg.floor, cfg.horizon,
-               cfg.least)
+        _judge(f, F, cfg, cfg.stall_complex if is_complex(z) else cfg.stall, off, dithers(z) and cfg.dither > 0.0)
     for l in range(W):                            # lanes out of iterations
         if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)

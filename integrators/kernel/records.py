@@ -113,6 +113,7 @@ Flags = namedtuple("Flags", [
     "scale", "pscale",            # every unknown relative to its coordinate's size (nz, d)
     "done", "ok", "stale", "prev", "its", "norm", "nan", "finite",   # Newton's per-lane bookkeeping
     "exact",                      # the last iteration's factors were taken at its own iterate (_judge)
+    "rounded", "rounds",          # the dithered approach: the iterate was rounded; roundings this solve
     "have", "hist", "live", "active", "okstep", "tbrk", "itn", "stp",   # the points' step flags
     "jn",                         # the steps a lane's point has taken in this call
     "depth",                      # the predictor's defects the lane's point holds (0 … DEPTH)
