@@ -116,8 +116,9 @@ def test_the_dithered_approach_keeps_the_point_vortices_momentum_walking():
     double-double run moves it by 4.5e-17 over 5·10⁴ steps), so P(q_n) − P(q₀) of the double run is
     round-off alone, and 64 starts tell a drift from a walk (±0.125 in mean/RMS for independent
     walks).  Every step iterates to its floor, yet without the dithered approach (Tolerances.dither)
-    P drifted with a sign common to the starts: slope 0.74, mean/RMS −0.40; with it 0.46, +0.14
-    (docs/brouwer.md, "The dithered approach")."""
+    P drifted with a sign common to the starts: slope 0.74, mean/RMS −0.40; with it 0.56, +0.08
+    (0.46, +0.14 with its first version, whose floor test stopped early; docs/brouwer.md, "The
+    dithered approach")."""
     slope, bias = momentum_drift(integrators.Tolerances(dither=True))
     assert slope <= 0.6 and abs(bias) <= 0.4
     slope, bias = momentum_drift(integrators.Tolerances())                  # (the default: not dithered)

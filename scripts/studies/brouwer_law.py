@@ -59,11 +59,13 @@ BOOTSTRAP = 200
 SAMPLES = 40              # log-spaced samples of the RMS series the fit uses
 EXPONENT_BOUND = 0.55     # issue 70: every pair at most this
 # the engine a rows file was measured with (written into the file); a file without it is older
-ENGINE = "2026-11-30: the dithered approach (Tolerances.dither)"
 SUMS = "2026-11-29: the increments summed exactly (kernel._weighted_sum)"
+ENGINE = SUMS             # the default since: Tolerances(dither=False) is bitwise that engine
+DITHER_OPTION = "2026-11-30: the dithered approach (Tolerances.dither)"   # its first version, the default for a day:
+                          # its floor test stopped early (docs/brouwer.md); the § rows of the table
 EXACT_POINTS = "2026-11-29: the equations see their points exactly (kernel.exact_points)"
 OLDER = "2026-11-28: before the exact points"
-MARKS = {ENGINE: "", SUMS: " †", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
+MARKS = {ENGINE: "", DITHER_OPTION: " §", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
 NEGLIGIBLE = 1e-19        # a truncation part below this: the reference is H(q₀) (no double-double run)
 COUPLING_MAX = 0.01       # the round-off part δE moves the phase by ~δE·T (frequencies ~ 1 here), which
                           # moves a truncation error of size e by ~e·δE·T: e·T at most this, so that
@@ -84,7 +86,7 @@ EXTRA_RULES = {}          # --rule NAME=JSON: more Tolerances, run over the whol
 
 def rules():
     return {**{name: integrators.Tolerances(**kw) for name, kw in EXTRA_RULES.items()},
-            "now": integrators.Tolerances(dither=True),      # (the dithered approach; not the default yet)
+            "now": integrators.Tolerances(),
             "fixed": integrators.Tolerances(tol=FIXED_TOL, dither=False),
             "extrapolate": integrators.Tolerances(predictor="extrapolate", tol=FIXED_TOL, dither=False)}
 
@@ -200,7 +202,7 @@ def fit(steps, r):
     return exponent(np.arange(n)), float(np.std(boot))
 
 
-def measure(system, q0, tableau, projection, h, steps, before_steps, every, cache, probe):
+def measure(system, q0, tableau, projection, h, steps, before_steps, every, cache, probe, now_only=False):
     """One pair: the reference, then each rule's double run; a dict of what was measured."""
     hi, lo, trunc, kind, dd_seconds = reference(system, q0, tableau, projection, h, steps, every, cache, probe)
     good = np.all(np.isfinite(hi), axis=0)
@@ -217,6 +219,8 @@ def measure(system, q0, tableau, projection, h, steps, before_steps, every, cach
                            f"the phase the round-off walks would move it by more than 1 % of the round-off")
         return out
     for name, tol in rules().items():
+        if now_only and name in ("fixed", "extrapolate"):
+            continue
         n_steps = min(before_steps, steps) if name in ("fixed", "extrapolate") else steps
         t = time.perf_counter()
         sol = integrators.integrate(system, q0, tableau=tableau, projection=projection, h=h, steps=n_steps,
@@ -287,14 +291,17 @@ def merged(docs):
                 row["before"] = dict(exponent=old["rules"]["now"]["exponent"],
                                      spread=old["rules"]["now"]["exponent_spread"],
                                      iterations=old["rules"]["now"]["iterations"], engine=old["engine"])
+            if old is not None and not old.get("left_out") and not row.get("left_out"):
+                for k in ("fixed", "extrapolate"):      # a --now-only row keeps the older rules' runs
+                    row["rules"].setdefault(k, old["rules"][k])
             out[key] = row
     return list(out.values())
 
 
 def markdown(rows):
     """The table of docs/brouwer.md: one line per pair, the three rules side by side; a pair measured
-    with an older engine than ENGINE is marked (MARKS: † the exact sums' engine (or the exact points'
-    before it), ‡ the engine before those),
+    with another engine than ENGINE is marked (MARKS: § the first version of the dithered approach,
+    whose floor test stopped early, † the exact points' engine, ‡ the engine before those),
     and a pair re-measured shows the older engine's exponent and iterations (now) beside."""
     lines = ["| system | pair | h | steps | reference (truncation) | it./step: now · fixed · extrapolate | "
              "exponent now | fixed | extrapolate | now, the engine before (it./step) | "
@@ -323,6 +330,36 @@ def markdown(rows):
     out = "\n".join(lines)
     if left:
         out += "\n\nLeft out:\n" + "\n".join(f"- {x}" for x in left)
+    return out
+
+
+def dither_table(rows):
+    """The dithered approach against the default, pair by pair, from rows whose rules are
+    ``dither`` (Tolerances(dither=True)) and ``undithered`` or ``now`` (the default; where a row
+    holds only its exponent and iterations, those): exponents, iterations a step, mean/RMS at the
+    end, and the averages over the pairs (docs/brouwer.md, "The dithered approach")."""
+    lines = ["| system | pair | exponent dithered | undithered | it./step dithered · undithered | "
+             "mean / RMS dithered · undithered |", "|---|---|---|---|---|---|"]
+    got = []
+    for row in rows:
+        if row.get("left_out"):
+            continue
+        a, b = row["rules"]["dither"], row["rules"].get("undithered", row["rules"].get("now"))
+        ratio = (lambda r: f"{r['mean_end'] / r['rms_end']:+.2f}" if "rms_end" in r else "—")
+        lines.append(f"| {row['system']} | {row['tableau']}-{row['projection']} | {a['exponent']:.2f} ± "
+                     f"{a['exponent_spread']:.2f} | {b['exponent']:.2f} ± {b['exponent_spread']:.2f} | "
+                     f"{a['iterations']:.2f} · {b['iterations']:.2f} | {ratio(a)} · {ratio(b)} |")
+        got.append((row["system"], a["exponent"], b["exponent"], a["exponent_spread"], b["exponent_spread"],
+                    a["iterations"], b["iterations"]))
+    out = "\n".join(lines)
+    for system in sorted({g[0] for g in got}) + [None]:
+        g = np.array([x[1:] for x in got if system is None or x[0] == system])
+        out += (f"\n\n{system or 'all'} ({len(g)} pairs): exponents average {g[:, 0].mean():.3f} dithered, "
+                f"{g[:, 1].mean():.3f} undithered; at most {EXPONENT_BOUND}: {int((g[:, 0] <= EXPONENT_BOUND).sum())}, "
+                f"{int((g[:, 1] <= EXPONENT_BOUND).sum())}; within twice their spread: "
+                f"{int((g[:, 0] - 2 * g[:, 2] <= EXPONENT_BOUND).sum())}, {int((g[:, 1] - 2 * g[:, 3] <= EXPONENT_BOUND).sum())}; "
+                f"iterations a step {np.min(g[:, 4] - g[:, 5]):+.2f} to {np.max(g[:, 4] - g[:, 5]):+.2f} "
+                f"({np.min(g[:, 4] / g[:, 5] - 1):+.0%} to {np.max(g[:, 4] / g[:, 5] - 1):+.0%})")
     return out
 
 
@@ -380,6 +417,10 @@ def main(argv=None):
     ap.add_argument("--markdown", default=None, nargs="+", metavar="JSON", help="print the table of rows files and stop")
     ap.add_argument("--rule", action="append", default=[], metavar="NAME=JSON",
                     help='another rule beside the three, e.g. fresh=\'{"trust_max_unknowns": 64, "trust_floor": 0}\'')
+    ap.add_argument("--dither-table", default=None, nargs="+", metavar="JSON", help="print the dithered approach "
+                    "against the default from rows files with the rules dither and undithered (or now), and stop")
+    ap.add_argument("--now-only", action="store_true", help="run the default rule alone (the fixed and "
+                    "extrapolate rules do not depend on the dither: --markdown takes them from the rows replaced)")
     ap.add_argument("--speed", action="store_true", help="point-steps per second of the default against the fixed "
                     "4 ulps (one thread) and stop")
     args = ap.parse_args(argv)
@@ -390,6 +431,9 @@ def main(argv=None):
     if args.speed:
         print("| pair | fixed 4 ulps | default | default / fixed | it./step |\n|---|---:|---:|---:|---|")
         speed()
+        return 0
+    if args.dither_table:
+        print(dither_table([row for f in args.dither_table for row in json.loads(Path(f).read_text())["rows"]]))
         return 0
     if args.markdown:
         docs = [json.loads(Path(f).read_text()) for f in args.markdown]
@@ -407,14 +451,14 @@ def main(argv=None):
     for system, q0, tab, proj, h, steps in cases(args):
         every = min(args.every, steps // 100)
         t = time.perf_counter()
-        row = measure(system, q0, tab, proj, h, steps, args.before_steps, every, cache, args.probe)
+        row = measure(system, q0, tab, proj, h, steps, args.before_steps, every, cache, args.probe, args.now_only)
         doc["rows"] = [r for r in doc["rows"] if (r["system"], r["tableau"], r["projection"]) != (system.name, tab, proj)]
         doc["rows"].append(row)
         now = row["rules"].get("now")
         print(f"{system.name} {tab}-{proj} h={h:g}: " + (row.get("left_out") or
               f"exponent {now['exponent']:.3f} ± {now['exponent_spread']:.3f}, it./step {now['iterations']:.2f}, "
-              f"RMS {now['rms_end']:.1e}; fixed {row['rules']['fixed']['exponent']:.3f}, "
-              f"extrapolate {row['rules']['extrapolate']['exponent']:.3f}" +
+              f"RMS {now['rms_end']:.1e}" + "".join(f"; {k} {row['rules'][k]['exponent']:.3f}"
+                                                    for k in ("fixed", "extrapolate") if k in row["rules"]) +
               "".join(f"; {k} {row['rules'][k]['exponent']:.3f} ± {row['rules'][k]['exponent_spread']:.3f}, it./step "
                       f"{row['rules'][k]['iterations']:.2f}, mean/RMS {row['rules'][k]['mean_end'] / row['rules'][k]['rms_end']:+.2f}"
                       for k in EXTRA_RULES)) + f" ({time.perf_counter() - t:.0f} s)",
