@@ -695,3 +695,24 @@ def value(hi, lo, dps=50):
     import mpmath
     with mpmath.workdps(dps):
         return mpmath.mpf(hi) + mpmath.mpf(lo)
+
+
+def squared_norm(x):
+    """Σ_k x_k² over the last axis of the double array x as a double-double (hi, lo) of arrays:
+    Dekker's TwoProduct by Veltkamp's splitting and Knuth's TwoSum in numpy, to about 2⁻¹⁰⁴ of the
+    sum, the same bits on any machine (no fused multiply-add, no long double).  What a constant of
+    the motion such as r² moved by in a double step can be read from it (scripts/studies/brouwer_step_bias.py)."""
+    x = np.asarray(x, dtype=np.float64)
+    c = 134217729.0 * x                     # 2²⁷ + 1
+    xh = c - (c - x)
+    xl = x - xh
+    p = x * x
+    e = ((xh * xh - p) + 2.0 * xh * xl) + xl * xl
+    hi, lo = p[..., 0], e[..., 0]
+    for k in range(1, x.shape[-1]):
+        s = hi + p[..., k]
+        t = s - hi
+        lo = lo + (((hi - (s - t)) + (p[..., k] - t)) + e[..., k])
+        hi = s
+    s = hi + lo
+    return s, lo - (s - hi)

@@ -11,7 +11,7 @@ from ..ddouble import DDType, dd
 from ..projections import END, MIDPOINT, PRE_PREVIOUS, PRE_UNKNOWN, START
 from ..simd import DDVec, Vec, at, ld, raw, st
 from .records import _coefficients, _OPTS, unknowns
-from .linalg import apply, contract, rounding, transpose_apply, _weighted_sum
+from .linalg import apply, contract, product_rounding, rounding, transpose_apply, _weighted_sum
 
 
 def lobatto_d(c, i, like):
@@ -66,13 +66,43 @@ def evaluate(ev, k, x, need, w, S, slot, d):
 # -- the step's equations ---------------------------------------------------------------------
 
 @njit(inline='always', **_OPTS)
+def _force(T, y, h, dH, G, Ge, d):
+    """G_m = Σ_l T[l, m] y_l − h ∇H_m in doubles, and into Ge what its products and sums dropped
+    (:func:`product_rounding`, :func:`rounding`): G + Ge is G to O(ε²) of its terms."""
+    for m in range(d):
+        acc = ld(T, m) * ld(y, 0)
+        err = product_rounding(ld(T, m), ld(y, 0), acc)
+        for l in range(1, d):
+            t = ld(T, l * d + m)
+            pr = t * ld(y, l)
+            sm = acc + pr
+            err = err + (rounding(acc, pr, sm) + product_rounding(t, ld(y, l), pr))
+            acc = sm
+        hg = h * ld(dH, m)
+        g = acc - hg
+        err = (err - product_rounding(h, ld(dH, m), hg)) + rounding(acc, -hg, g)
+        st(G, m, g)
+        st(Ge, m, err)
+
+
+@njit(inline='always', **_OPTS)
+def _plain_sum(wt, o, v, s, d, m):
+    """Σ_i wt_{o+i} v_{i,m} in plain arithmetic (for error terms)."""
+    acc = wt[o] * ld(v, m)
+    for i in range(1, s):
+        acc = acc + wt[o + i] * ld(v, i * d + m)
+    return acc
+
+
+@njit(inline='always', **_OPTS)
 def _stages(z, jac, ev, P, c, q0, s, d, w, S):
     """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
     eq:vprk_3); with ``jac`` also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i G_i (sY, sG), double +
     correction weights.  In plain doubles every sum is formed to O(ε²) (:func:`_weighted_sum`):
     ϑ_q(Q_i) e_i goes to tE, e_i what forming Q_i in doubles dropped (Σ_j a_ij Y_j's rounding,
-    q̃ + that sum's, q̃'s own ``S.eQ``: :func:`exact_points`), and what rounding the two sums to
-    double dropped to ``S.sYe``, ``S.sGe``."""
+    q̃ + that sum's, q̃'s own ``S.eQ``: :func:`exact_points`), what forming G_i from the values
+    ϑ_q(Q_i), Y_i and ∇H(Q_i) dropped to ``S.Ge`` (:func:`_force`), and what rounding the two sums
+    to double dropped (with Σ b_i Ge_i) to ``S.sYe``, ``S.sGe``."""
     k, h = P.k, P.h
     dd = d * d
     ddd = dd * d
@@ -102,9 +132,12 @@ def _stages(z, jac, ev, P, c, q0, s, d, w, S):
         if exact:
             apply(at(T, i * dd), e, at(tE, i * d), d)
         Gi = at(G, i * d)
-        transpose_apply(at(T, i * dd), at(z, i * d), Gi, d)
-        for m in range(d):
-            st(Gi, m, ld(Gi, m) - h * ld(dH, i * d + m))
+        if exact:                               # G_i and what forming it dropped (Ge)
+            _force(at(T, i * dd), at(z, i * d), h, at(dH, i * d), Gi, at(w, S.Ge + i * d), d)
+        else:
+            transpose_apply(at(T, i * dd), at(z, i * d), Gi, d)
+            for m in range(d):
+                st(Gi, m, ld(Gi, m) - h * ld(dH, i * d + m))
         if jac:
             Ki = at(K, i * dd)
             contract(at(TT, i * ddd), at(z, i * d), Ki, d)
@@ -114,6 +147,7 @@ def _stages(z, jac, ev, P, c, q0, s, d, w, S):
         if exact:                               # the increments to O(ε²): what rounding them drops
             y, ye = _weighted_sum(c.b, c.b_lo, 0, z, s, d, m)       # goes to sYe, sGe
             g, ge = _weighted_sum(c.b, c.b_lo, 0, G, s, d, m)
+            ge = ge + _plain_sum(c.b, 0, at(w, S.Ge), s, d, m)
             st(sY, m, y)
             st(sG, m, g)
             st(w, S.sYe + m, ye)
@@ -145,7 +179,14 @@ def _residual(z, jac, r, ev, P, c, d, s, w, S):
     dropped (:func:`exact_points`): ϑ(Q_i) − p̃ is then the increment's own, to its own relative
     precision, not to an ulp of q.  Without it the part of Y below an ulp of q is left where the
     guess put it, and the compensated sum of q_{n+1} accumulates it (a constant of the motion kept
-    exactly in exact arithmetic then walks off by whole ulps, one sign: docs/brouwer.md).
+    exactly in exact arithmetic then walks off by whole ulps, one sign: docs/brouwer.md).  And the
+    stage rows are formed to O(ε²) of their terms from the values the system returns: Σ_j ā_ij G_j
+    by :func:`_weighted_sum`, each G_j with what forming it dropped (``S.Ge``, :func:`_force`).
+    Rounded instead, the residual's own rounding left every step's result off by a part of one
+    sign: one GLRK2-symmetric step of a rotation whose ϑ and H evaluate exactly moved r² outwards by
+    +0.021 of its round-off's spread (10⁶ points), and the symmetric guiding centre's r² drifted
+    at large steps (docs/brouwer.md, "The residual's own rounding").  What the system's own
+    evaluations round is not the engine's to undo.
     """
     k, plan = P.k, P.plan
     dd = d * d
@@ -191,6 +232,15 @@ def _residual(z, jac, r, ev, P, c, d, s, w, S):
                 st(pwe, m, ld(w, S.pbe + m))
     for i in range(s):
         for m in range(d):
+            if exact:                           # ϑ(Q_i) − p̃ − Σ_j ā_ij G_j, every sum and G_j to O(ε²)
+                x, xe = _weighted_sum(c.abar, c.abar_lo, i * s, G, s, d, m)
+                xe = xe + _plain_sum(c.abar, i * s, at(w, S.Ge), s, d, m)
+                rr = ld(th, i * d + m) - ld(pb, m)
+                rr = (((rr + ld(tE, i * d + m)) - ld(pwe, m)) - x) - xe
+                if plan.lobatto:
+                    rr = rr + ld(z, iM + m) * lobatto_ratio(c, i, rr)
+                st(r, i * d + m, rr)
+                continue
             acc = c.abar[i * s] * ld(G, m)
             for j in range(1, s):
                 acc = acc + c.abar[i * s + j] * ld(G, j * d + m)

@@ -92,6 +92,8 @@ Scratch = namedtuple("Scratch", [
     "Q", "th", "T", "TT", "dH", "HH", "G", "K",
     # ϑ_q(Q_i) e_i: the linear part of ϑ over Q_i's rounding error e_i (:func:`_stages`, plain doubles)
     "tE",
+    # what forming G_i in doubles dropped (its products' and sums' roundings, :func:`_stages`)
+    "Ge",
     # the point slots START, MIDPOINT, END: ϑ, ϑ_q, ϑ_qq, ∇H, ∇²H
     "pth", "pT", "pTT", "pdH", "pHH",
     # d-vectors
@@ -149,7 +151,7 @@ def layout(s, d, nz):
     turns back into the records (:func:`_records`: numba's parallel loop takes no named tuples)."""
     dd, sd = d * d, s * d
     S = _offsets(Scratch, dict(
-        Q=sd, tE=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
+        Q=sd, tE=sd, Ge=sd, th=sd, T=s * dd, TT=s * dd * d, dH=sd, HH=s * dd, G=sd, K=s * dd,
         pth=3 * d, pT=3 * dd, pTT=3 * dd * d, pdH=3 * d, pHH=3 * dd,
         **dict.fromkeys(D_VECTORS, d),
         z=nz, zev=nz, r=nz, Jt=nz * nz, S=2 * dd, PL=dd, pz=d, pzev=d, pr=d, pJ=dd, guess=sd + 2 * d,
