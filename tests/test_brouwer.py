@@ -4,8 +4,9 @@ The round-off part is the double run's energy minus the double-double run's (sam
 starts), both energies in double-double.  What is asserted is the exponent of its RMS over the
 starts against the step number, a bound with room for the fit's spread over this many starts
 (docs/brouwer.md: ± 0.08-0.15 here), not the round-off's size, which depends on the CPU.  The rule
-before issue 70 (Newton stopped at a fixed 4 ulps, its iterates not dithered) drifts in both cases,
-so the bound can fail.
+before issue 70 (Newton stopped at a fixed 4 ulps, its iterates not dithered) drifts on the
+degenerate case, so the bound can fail; the canonical cases' bound failed on the engine before the
+step saw the state's compensation terms (their docstrings).
 """
 import numpy as np
 import pytest
@@ -56,11 +57,16 @@ def kepler(n=16):
 
 
 @pytest.mark.slow
-def test_the_round_off_of_a_kepler_orbit_walks():
-    """GLRK2-none, e = 0.5, h = 0.002, 2·10⁴ steps, 16 starts: 0.55 ± 0.08 (the fixed 4 ulps: 0.88)."""
+@pytest.mark.parametrize("tableau, h", [("GLRK1", 0.0005), ("GLRK2", 0.002)])
+def test_the_round_off_of_a_kepler_orbit_walks(tableau, h):
+    """Unprojected, e = 0.5, 2·10⁴ steps, 16 starts: GLRK1 (h = 0.0005) −0.18, GLRK2 (h = 0.002)
+    0.20.  The engine before the step saw the state's compensation terms read 1.38 on GLRK1 (its
+    parasitic mode walked: test_unprojected_glrk1_keeps_the_momentum_relation) and 0.20 on GLRK2.
+    The fixed 4 ulps, this test's control before (0.88 on GLRK2 with the engine of 2026-11-28),
+    now reads 0.13 there: on these systems ϑ is linear, the stage points follow p, and what Newton
+    leaves in v's increment stays out of them (docs/brouwer.md, "The state's compensation terms")."""
     system, q0 = kepler()
-    assert exponent(system, q0, "GLRK2", "none", 0.002, 20_000) <= BOUND
-    assert exponent(system, q0, "GLRK2", "none", 0.002, 20_000, integrators.Tolerances(tol=FIXED_TOL, dither=False)) > BOUND
+    assert exponent(system, q0, tableau, "none", h, 20_000) <= BOUND
 
 
 @pytest.mark.slow
@@ -120,11 +126,14 @@ def test_the_dithered_approach_keeps_the_point_vortices_momentum_walking():
     P drifted with a sign common to the starts: slope 0.74, mean/RMS −0.40; with it 0.56, +0.08
     (0.46, +0.14 with its first version, whose floor test stopped early; docs/brouwer.md, "The
     dithered approach").  With the residual's own sums (2026-11-30): 0.77, −0.40 undithered, 0.40,
-    −0.12 dithered: that change does not touch this drift."""
+    −0.12 dithered; with the state's compensation terms seen as well: 0.83, −0.46 and 0.63, +0.14.
+    Neither change touches this drift.  The slope of 64 walks over these outputs scatters by about
+    ±0.1 between engines whose steps differ in last bits (0.40-0.63 dithered, 0.74-0.83 not), the
+    mean/RMS by about its ±0.125: the bounds leave that room."""
     slope, bias = momentum_drift(integrators.Tolerances(dither=True))
-    assert slope <= 0.6 and abs(bias) <= 0.4
+    assert slope <= 0.7 and abs(bias) <= 0.4
     slope, bias = momentum_drift(integrators.Tolerances())                  # (the default: not dithered)
-    assert slope > 0.6
+    assert slope > 0.7
 
 
 @pytest.mark.parametrize("pair", ["GLRK3-symmetric", "SRK3-midpoint", "GLRK4-symplectic"])
@@ -168,3 +177,31 @@ def test_one_step_of_a_rotation_rounds_without_bias():
     v = ((h1 - h0) + (l1 - l0)) / h0                    # r²'s relative change, to about 1e-30
     assert 0 < v.std() < 1e-15                          # round-off, not truncation
     assert abs(v.mean()) <= 4 * v.std() / np.sqrt(n)
+
+
+@pytest.mark.parametrize("case", ["pendulum", "kepler"])
+def test_unprojected_glrk1_keeps_the_momentum_relation(case):
+    """Canonical systems written as degenerate ones, ϑ(q) = (v, 0) on q = (x, v): the pendulum (H =
+    v²/2 − cos x) and a Kepler orbit (e = 0.5).  Their unprojected GLRK1 steps keep p = v (the
+    state's momentum against ϑ(q)) in exact arithmetic, and the relation's error is their parasitic
+    mode (its sign flipped every step: it neither grows nor decays).  A step must advance the state
+    it was given, q and p with their compensation terms: seeing only their doubles, it fed what the
+    compensation terms held back into that mode every step, p − v broke from 0 after 10³-10⁴ steps
+    and walked by about an ulp a step, and the energy's round-off with it (10⁶ steps, 64 starts:
+    exponent 0.72 and RMS 4.1e-14 at the end on the pendulum, 0.91 and 9.8e-14 on the Kepler orbit;
+    seeing the whole state 0.11 and 7.8e-17, −0.02 and 6.6e-17; docs/brouwer.md).  16 starts, 2·10⁴
+    steps: |p − v| within an ulp of the orbit's largest |v| at every output (the engine before: 2.3e-14
+    and 2.4e-14 on these runs)."""
+    if case == "pendulum":
+        x, v = sympy.symbols("x v")
+        system = system_from([v, 0], v**2 / 2 - sympy.cos(x), [x, v], name="pendulum")
+        q0, h = np.stack([np.linspace(0.5, 1.5, 16), np.zeros(16)], 1), 0.002
+    else:
+        (system, q0), h = kepler(), 0.0005
+    k = q0.shape[1] // 2
+    sol = integrators.integrate(system, q0, tableau="GLRK1", projection="none", h=h, steps=20_000,
+                                save_every=1_000)
+    assert np.isfinite(sol.breakdown_time).sum() == 0
+    v = sol.q[..., k:]
+    gap = np.abs(sol.p[..., :k] - v)
+    assert np.all(gap <= np.spacing(np.abs(v).max(axis=0))), gap.max()
