@@ -325,12 +325,12 @@ class Tolerances:
         only after a fresh Jacobian or once it stops shrinking (the carried factors go on within
         that band, refreshed where they contract by less than 0.8).  The first version lacked that
         and stopped lanes up to 32 ulps of their scale from the solution (P_ζ of near-axis Boozer
-        orbits off by 1.3e-12 instead of 6e-15, tests/test_boozer.py).  Corrected, over the 63
-        degenerate pairs of docs/brouwer.md ("The dithered approach") the round-off exponents
-        average 0.515 against 0.550 undithered: it removes the point vortices' and
-        Lotka–Volterra's drifts (0.497 against 0.558) but not the guiding centre's bias (0.540
-        against 0.537), puts two Lotka–Volterra pairs over 0.55, and costs 2-51 % more Newton
-        iterations, so it is not the default (:func:`integrators.kernel.newton._update`)
+        orbits off by 1.3e-12 instead of 6e-15, tests/test_boozer.py).  Over the 63 degenerate
+        pairs of docs/brouwer.md the round-off exponents average 0.498 against the default's 0.518
+        (today's engine; 51 against 44 at most 0.55): it removes the point vortices' GLRK3-symmetric
+        drift but leaves GLRK3-symplectic at 0.66 ± 0.04, and costs 2-51 % more Newton iterations,
+        so it is not the default (:func:`integrators.kernel.newton._update`; docs/brouwer.md, "A last
+        approach that does not depend on the guess")
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
