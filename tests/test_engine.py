@@ -11,7 +11,7 @@ import sympy
 
 import integrators
 from integrators.codegen import generate_source, point_functions
-from integrators.engine import set_threads
+from integrators.engine import FIXED_TOL, set_threads
 from integrators.projections import PROJECTIONS, admission
 
 from integrators import reference
@@ -297,12 +297,20 @@ def test_one_specialisation_names_what_a_call_compiles():
     from integrators.kernel import Newton
     scaled = [Newton._fields.index(n) for n in ("tol", "stall", "floor", "carry", "fine")]
     dither = Newton._fields.index("dither")        # the dithered approach: double unknowns only
-    same = [i for i in range(len(Newton._fields)) if i not in scaled and i != dither]
+    settle = Newton._fields.index("settle")        # the settled approach: the same
+    same = [i for i in range(len(Newton._fields)) if i not in scaled and i not in (dither, settle)]
     assert np.array_equal(spec.newton[scaled], real.newton[scaled] * scale)
     assert np.array_equal(spec.newton[same], real.newton[same])
     assert real.newton[dither] == 0.0 and spec.newton[dither] == 0.0          # (opt-in)
     assert integrators.Tolerances(dither=True).array()[dither] == 2.0 ** -45
     assert integrators.Tolerances(dither=True).array(double_double=True)[dither] == 0.0
+    assert real.newton[settle] == 0.0 and spec.newton[settle] == 0.0          # (opt-in)
+    on = dict(settle=True)
+    assert integrators.Tolerances(**on).array(unknowns=16)[settle] == 2.0 ** -48
+    assert integrators.Tolerances(**on).array(double_double=True, unknowns=16)[settle] == 0.0
+    for off in (dict(dither=True), dict(tol=FIXED_TOL), dict(predictor="extrapolate")):   # nor before the floor
+        assert integrators.Tolerances(**on, **off).array(unknowns=16)[settle] == 0.0
+    assert integrators.Tolerances(**on).array(unknowns=17)[settle] == 0.0     # carried factors: not settled
     with pytest.raises(ValueError, match="lanes must be 1 or 8"):
         dd._specialise(dd.state(q), lanes=16)
 

@@ -90,6 +90,61 @@ def _update(z, r, done, scale, nz, f, F, dither):
 
 
 @njit(inline='always', **_OPTS)
+def _settle(z, done, scale, nz, f, F, grid):
+    """The settled approach (``grid`` > 0, double unknowns only): the first iterate of a solve reached
+    by an update of at most ``grid`` (relative, like the size: 2⁻⁴⁸, 16 ulps of scale) is rounded to
+    a grid of ulp(c), c = grid·2⁵¹·scale per unknown (8 ulps of scale; a move of at most 4), and
+    Newton goes on from there.  At the floor the computed residual is not smooth (a stage point's
+    rounding flips as an unknown moves by less than its ulp), so where Newton stops depends on the
+    side it comes from; a guess whose error is smooth in time came from the same side step after
+    step, and the round-off drifted (point vortices GLRK3-symmetric: the angular momentum over 64
+    starts and 2·10⁵ steps grew like n^0.98 with mean/RMS −0.47; docs/brouwer.md).  The rounded
+    iterate's offset from the solution is set by where the solution falls in the grid, not by the
+    guess: an iterate within 16 ulps of it rounds to the grid point next to the solution whatever
+    side it came from.  Once a solve; returns the lanes rounded now (their update is not the floor:
+    ``off``); ``F.rounds`` counts the updates since (:func:`_settling`, :func:`_settled`)."""
+    first = mand(mand(mnot(done), ld(f, F.norm) <= grid), ld(f, F.rounds) == 0.0)
+    _to_grid(z, scale, nz, first, grid)
+    st(f, F.rounded, sel(first, 1.0, 0.0))
+    st(f, F.rounds, sel(first, 1.0, ld(f, F.rounds)))
+    return first
+
+
+@njit(inline='always', **_OPTS)
+def _settling(done, f, F, accept):
+    """Before :func:`_judge`, the settled approach's two updates after a rounding (``F.rounds`` 2: the
+    update taken at the rounded iterate; 3: the one after it).  Returns the lanes whose solve ends
+    now (the update at 3 is at most ``accept``, relative: the iterate it was computed at came from
+    the grid, not from the guess's side, and lies within about that of the solution) and the lanes
+    whose update is not the floor (the one at 2: its size is the rounding's, and its ratio to the
+    update before it says nothing of the factors).  Where the update at 3 is larger, the floor test
+    goes on as usual."""
+    cnt = ld(f, F.rounds)
+    sz = ld(f, F.norm)
+    ends = mand(mand(mnot(done), cnt == 3.0), mand(sz <= accept,
+                                                   mand(ld(f, F.finite) != 0.0, ld(f, F.nan) == 0.0)))
+    return ends, cnt == 2.0
+
+
+@njit(inline='always', **_OPTS)
+def _settled(done, ends, f, F):
+    """After :func:`_judge`: the lanes ``ends`` have converged; the update taken at the rounded iterate
+    asks for no fresh Jacobian (the judge reads its growth as factors that stopped contracting: a
+    Jacobian there took GLRK2-symmetric's Newton work on the predictor's protocol from 4.56 to 7.34,
+    tests/test_predictor.py's ``newton_per_step``); the count of updates since the rounding goes on.
+    Without that Jacobian, carried factors that contract by more than half an iteration come back
+    from the grid slowly and their next update "stops halving" a few ulps from the solution, where
+    the floor test stops (the guiding centre's GLRK6-symmetric drifted so, 0.96 over 5·10⁴ steps):
+    hence the settled approach only in the pairs whose guesses take Jacobians
+    (:class:`integrators.engine.Tolerances`, ``settle``)."""
+    cnt = ld(f, F.rounds)
+    st(f, F.done, sel(ends, 1.0, ld(f, F.done)))
+    st(f, F.ok, sel(ends, 1.0, ld(f, F.ok)))
+    st(f, F.stale, sel(mand(mnot(done), cnt == 2.0), 0.0, ld(f, F.stale)))
+    st(f, F.rounds, sel(cnt > 0.0, cnt + 1.0, 0.0))
+
+
+@njit(inline='always', **_OPTS)
 def _judge(f, F, cfg, stall, off, strict):
     """Each lane still iterating after an update: failed (NaN, not finite), converged (size ≤ tol, or
     ≤ fine² (an update of 10⁻²⁸ of its coordinate, far below what even the compensation term of q
@@ -184,6 +239,7 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     st(f, F.rounds, 0.0)
     if dithers(z) and cfg.dither > 0.0:          # the guess too: with the defects' recurrence it is often
         _to_grid(z, scale, nz, active, cfg.dither)   # within the floor already, and its side is the history's
+    settles = dithers(z) and cfg.settle > 0.0
     for _ in range(int(cfg.maxiter)):
         done = ld(f, F.done) != 0.0
         if not anyl(mnot(done)):
@@ -211,7 +267,14 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
         lset(f, F.gits, 0, lget(f, F.gits, 0) + 1.0)
         off = ld(f, F.rounded) != 0.0             # this update was taken at a rounded iterate
         _update(z, r, done, scale, nz, f, F, cfg.dither)
+        ends = done
+        if settles:
+            off = mor(off, _settle(z, done, scale, nz, f, F, cfg.settle))
+            ends, after = _settling(done, f, F, cfg.settle_accept)
+            off = mor(off, after)
         _judge(f, F, cfg, cfg.stall_complex if is_complex(z) else cfg.stall, off, dithers(z) and cfg.dither > 0.0)
+        if settles:
+            _settled(done, ends, f, F)
     for l in range(W):                            # lanes out of iterations
         if lget(f, F.done, l) == 0.0 and cfg.accept != 0 and lget(f, F.its, l) > 0:
             lset(f, F.ok, l, 1.0)
