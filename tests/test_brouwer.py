@@ -129,8 +129,9 @@ def test_the_dithered_and_settled_approaches_keep_the_point_vortices_momentum_wa
     −0.12 dithered; with the state's compensation terms seen as well: 0.83, −0.46 and 0.63, +0.14.
     Neither change touches this drift.  The settled approach (Tolerances.settle: the first iterate
     within 16 ulps rounded to a grid of 8, so that the last approach does not start from the
-    guess's side) walks: 0.49, −0.14 (over 2·10⁵ steps 0.55, +0.19, where the default reads
-    0.98, −0.47).  The slope of 64 walks over these outputs scatters by about
+    guess's side; its solve ends only within 2⁻⁶⁰ of the floor) walks: 0.36, −0.21 (over 2·10⁵
+    steps 0.57, −0.25, where the default reads 0.98, −0.47; its first version, ended within 2 ulps:
+    0.49, −0.14).  The slope of 64 walks over these outputs scatters by about
     ±0.1 between engines whose steps differ in last bits (0.40-0.63 dithered, 0.74-0.83 not), the
     mean/RMS by about its ±0.125: the bounds leave that room."""
     for tolerances in (integrators.Tolerances(dither=True), integrators.Tolerances(settle=True)):
