@@ -347,10 +347,11 @@ class Tolerances:
         0.37-0.82), and so does GLRK3-symmetric's angular momentum (2·10⁵ steps: n^0.57 against
         n^0.98); over the 63 degenerate pairs of docs/brouwer.md none stays above 0.55 by twice its
         spread (two by default).  Not the default: ×1.27 the Newton iterations (median; 1.10-1.38)
-        on the 43 of those pairs it acts on, the predictor's protocol's work up to 1.24 of the rule
-        before issue 55, and near-axis Boozer orbits' P_ζ round-off above tests/test_boozer.py's
-        1e-13 under GLRK2-symmetric (1.14e-13; docs/brouwer.md, "The settled approach, ended at the
-        floor").  Its first version ended at 2 ulps and took iterates a few ulps off (Kepler's
+        on the 43 of those pairs it acts on, up to 1.24 times the Newton work of the rule
+        ``Tolerances(predictor="extrapolate", tol=FIXED_TOL)`` on the predictor's protocol, and
+        near-axis Boozer orbits' P_ζ round-off above tests/test_boozer.py's 1e-13 under
+        GLRK2-symmetric (1.14e-13; docs/brouwer.md, "The settled approach, ended at the floor").
+        Ending the solve within 2 ulps instead of 2⁻⁶⁰ takes iterates a few ulps off (Kepler's
         round-off 3-7.5×)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
