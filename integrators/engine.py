@@ -251,7 +251,7 @@ class State:
 
 FIXED_TOL = 4 * np.finfo(np.float64).eps   # a fixed Newton tolerance of 4 ulps: faster, and its round-off drifts (docs/brouwer.md)
 DITHER = 2.0 ** -45                         # Tolerances.dither: iterates after larger updates rounded to 64 ulps of scale
-SETTLE = 2.0 ** -48                         # Tolerances.settle: the first iterate after an update within 16 ulps of scale rounded to 8
+SETTLE = 2.0 ** -48                         # Tolerances.settle: the first iterate after an update within 16 ulps of scale rounded to 8 of its own
 SETTLE_ACCEPT = 2.0 ** -60                  # ... and the solve ends where the update after the next is within 1/256 ulp of scale
 
 
@@ -328,39 +328,43 @@ class Tolerances:
         that band, refreshed where they contract by less than 0.8).  The first version lacked that
         and stopped lanes up to 32 ulps of their scale from the solution (P_ζ of near-axis Boozer
         orbits off by 1.3e-12 instead of 6e-15, tests/test_boozer.py).  Over the 63 degenerate
-        pairs of docs/brouwer.md the round-off exponents average 0.498 against the default's 0.518
-        (today's engine; 51 against 44 at most 0.55): it removes the point vortices' GLRK3-symmetric
-        drift but leaves GLRK3-symplectic at 0.66 ± 0.04, and costs 2-51 % more Newton iterations,
-        so it is not the default (:func:`integrators.kernel.newton._update`; docs/brouwer.md, "A last
+        pairs of docs/brouwer.md the round-off exponents average 0.498 against 0.518 without it
+        (the engine before the settled approach; 51 against 44 at most 0.55): it removes the point
+        vortices' GLRK3-symmetric drift but leaves GLRK3-symplectic at 0.66 ± 0.04, and costs 2-51 %
+        more Newton iterations, so it is not the default; with it the settled approach is off (:func:`integrators.kernel.newton._update`; docs/brouwer.md, "A last
         approach that does not depend on the guess")
-    settle : the settled approach (default False; with ``tol`` 0, not ``dither``, double unknowns
+    settle : the settled approach (default True; with ``tol`` 0, not ``dither``, double unknowns
         only, and only in the pairs whose guesses take Jacobians: at most ``trust_max_unknowns``
         Newton unknowns, ``"defects"``): the first Newton iterate of a solve reached by an update of
-        at most 2⁻⁴⁸ of its scale (16 ulps) is rounded to a grid of 8 ulps of that scale, and the
-        solve ends at the iterate after the next where its update is at most 2⁻⁶⁰ (else the floor
-        test goes on).  Where Newton stops at the floor depends on the side it comes from, and a
-        guess whose error is smooth in time comes from the same side step after step: an iterate
-        within 16 ulps rounds to the grid point next to the solution whatever side it came from
-        (:func:`integrators.kernel.newton._settle`).  Over 64 starts and 5·10⁴ steps the point
-        vortices' GLRK3-symmetric, -symplectic, -midpoint and SRK3-symmetric energy round-off then
-        walks (exponents 0.55, 0.49, 0.48, 0.45; by default 0.69, 0.75, 0.67, 0.62 with |mean/RMS|
-        0.37-0.82), and so does GLRK3-symmetric's angular momentum (2·10⁵ steps: n^0.57 against
-        n^0.98); over the 63 degenerate pairs of docs/brouwer.md none stays above 0.55 by twice its
-        spread (two by default).  Not the default: ×1.27 the Newton iterations (median; 1.10-1.38)
-        on the 43 of those pairs it acts on, up to 1.24 times the Newton work of the rule
-        ``Tolerances(predictor="extrapolate", tol=FIXED_TOL)`` on the predictor's protocol, and
-        near-axis Boozer orbits' P_ζ round-off above tests/test_boozer.py's 1e-13 under
-        GLRK2-symmetric (1.14e-13; docs/brouwer.md, "The settled approach, ended at the floor").
-        Ending the solve within 2 ulps instead of 2⁻⁶⁰ takes iterates a few ulps off (Kepler's
-        round-off 3-7.5×)
+        at most 2⁻⁴⁸ of its scale (16 ulps) is rounded to a grid of 8 ulps of each coordinate's own
+        size (|q|, not max(|q|, 1)), and the solve ends at the iterate after the next where its
+        update is at most 2⁻⁶⁰ of scale (else the floor test goes on).  Where Newton stops at the
+        floor depends on the side it comes from, and a guess whose error is smooth in time comes
+        from the same side step after step; a grid point's offset from the solution does not
+        depend on the guess (:func:`integrators.kernel.newton._settle`).  Over 64 starts and 5·10⁴
+        steps the point vortices' GLRK3-symmetric, -symplectic, -midpoint and SRK3-symmetric
+        energy round-off then walks (exponents 0.50, 0.49, 0.51, 0.41; with ``settle=False`` 0.69,
+        0.75, 0.67, 0.62 and |mean/RMS| 0.37-0.82), and so does GLRK3-symmetric's angular momentum
+        (2·10⁵ steps: n^0.53 against n^0.98); over the 63 degenerate pairs of docs/brouwer.md the
+        exponents average 0.485 against 0.518, none above 0.55 by twice its spread (two with
+        ``settle=False``).  It costs Newton iterations: ×1.22 (median; 1.10-1.30) on the 43 of
+        those pairs it acts on, and on the predictor's protocol 0.69-1.20 of the Newton work of
+        ``Tolerances(predictor="extrapolate", tol=FIXED_TOL)`` against 0.58-1.00 with
+        ``settle=False``: the bound on the round-off's growth over the iterations
+        (docs/brouwer.md, "The settled approach, the default").  ``settle=False`` is bitwise the
+        engine before it was the default.  Its grid in ulps of max(|q|, 1), as first made, was
+        hundreds of ulps of a near-axis coordinate (x, y ≈ 0.004) and left P_ζ of near-axis Boozer
+        orbits at 1.14e-13 (tests/test_boozer.py: 4.3e-14 in the coordinates' own ulps); ending the
+        solve within 2 ulps instead of 2⁻⁶⁰ takes iterates a few ulps off (Kepler's round-off
+        3-7.5×)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
 
     ``Tolerances(predictor="extrapolate", tol=FIXED_TOL, dither=False)`` is the polynomial guess alone
     at a fixed tolerance and ``Tolerances(tol=FIXED_TOL, dither=False)`` the defects' guess at a fixed
-    tolerance, bitwise the rules docs/benchmarks-history.md compares; ``Tolerances(dither=False)`` the
-    default before the dithered approach.
+    tolerance, bitwise the rules docs/benchmarks-history.md compares; ``Tolerances(settle=False)`` the
+    default before the settled approach.
     """
 
     tol: float = 0.0
@@ -380,7 +384,7 @@ class Tolerances:
     jacobian_every: int = 1
     recurrence: int = 4
     dither: bool = False
-    settle: bool = False
+    settle: bool = True
 
     def __post_init__(self):
         if self.predictor not in PREDICTORS:

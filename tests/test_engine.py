@@ -304,7 +304,8 @@ def test_one_specialisation_names_what_a_call_compiles():
     assert real.newton[dither] == 0.0 and spec.newton[dither] == 0.0          # (opt-in)
     assert integrators.Tolerances(dither=True).array()[dither] == 2.0 ** -45
     assert integrators.Tolerances(dither=True).array(double_double=True)[dither] == 0.0
-    assert real.newton[settle] == 0.0 and spec.newton[settle] == 0.0          # (opt-in)
+    assert real.newton[settle] == 2.0 ** -48 and spec.newton[settle] == 0.0  # (the default: 4 unknowns)
+    assert integrators.Tolerances(settle=False).array(unknowns=4)[settle] == 0.0
     on = dict(settle=True)
     assert integrators.Tolerances(**on).array(unknowns=16)[settle] == 2.0 ** -48
     assert integrators.Tolerances(**on).array(double_double=True, unknowns=16)[settle] == 0.0

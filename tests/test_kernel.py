@@ -48,7 +48,8 @@ def test_the_scratch_layout_lays_every_buffer_end_to_end(s, d, nz):
         (s * d, s * d * d, s * d ** 3, nz * nz, nz * nz, nz, (s + 2) * d)       # guess: stages, Λ, μ
     assert (size["base"], size["D"]) == ((s + 2) * d, kernel.DEPTH * (s + 2) * d)
     assert dict(zip(IP._fields[:-1], np.diff(list(IP)))) == {"piv": nz, "pivt": nz, "ipiv": d, "pt": 1}
-    assert F.size == nz + d + (len(F._fields) - 3)           # scale, pscale, then one flag each
+    assert F.size == 2 * (nz + d) + (len(F._fields) - 5)     # scale, pscale, own, pown, then one flag each
+    assert (F.own - F.scale, F.pown - F.pscale) == (nz + d, nz + d)
 
 
 def test_the_lane_width_rule():

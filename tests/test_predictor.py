@@ -46,25 +46,38 @@ SCHEDULE = integrators.Tolerances(trust_max_unknowns=64, jacobian_every=2)   # .
 # 4.62, 4.50.  (With the exact points alone: 4.06,
 # 8.37, 4.23, 4.31, 4.68, 5.75; one orbit 4.20 / 4.56.  Before them: 3.65, 6.50, 3.83, 4.02, 4.38,
 # 5.28; one orbit 4.04 / 4.36.  With the fixed 4 ulps before: 2.48, 4.46, 2.53, 2.73, 3.60, 3.65.)
-WORK = [("GLRK2", "symmetric", 32, 4.2, 0.62), ("GLRK2", "standard", 32, 8.6, 1.0),
-        ("SRK3", "symmetric", 32, 4.4, 0.62), ("GLRK4", "symmetric", 32, 4.55, 0.75),
-        ("GLRK6", "symmetric", 32, 4.85, 0.82), ("GLRK4", "symmetric", 1, 4.55, 0.72),
-        ("GLRK6", "symmetric", 1, 4.7, 0.76), ("GLRK1", "none", 32, 5.95, 1.02)]
+# Measured 2026-11-30 (late) with the settled approach the default (Tolerances.settle, its grid in
+# the coordinates' own ulps), its iterations and work beside the predictor's alone (settle=False,
+# the numbers above): GLRK2-symmetric 5.09 (work 5.53, 0.71 of the old rule's), GLRK2-standard 10.22
+# (12.86, 1.14), SRK3-symmetric 5.16 (5.79, 0.69), GLRK1-none 7.15 (8.58, 1.20); GLRK4 and GLRK6
+# (more than 16 Newton unknowns) unchanged.  Accuracy over iterations (docs/brouwer.md): the
+# round-off then walks on the pairs it acts on; GLRK2-standard and GLRK1-none take more iterations
+# than the old rule, which stopped at 4 ulps.
+UNSETTLED = integrators.Tolerances(settle=False)   # the predictor alone, the bounds of issue 55
+WORK = [("GLRK2", "symmetric", 32, 4.2, 0.62, 5.2, 0.73), ("GLRK2", "standard", 32, 8.6, 1.0, 10.4, 1.17),
+        ("SRK3", "symmetric", 32, 4.4, 0.62, 5.3, 0.71), ("GLRK4", "symmetric", 32, 4.55, 0.75, 4.55, 0.75),
+        ("GLRK6", "symmetric", 32, 4.85, 0.82, 4.85, 0.82), ("GLRK4", "symmetric", 1, 4.55, 0.72, 4.55, 0.72),
+        ("GLRK6", "symmetric", 1, 4.7, 0.76, 4.7, 0.76), ("GLRK1", "none", 32, 5.95, 1.02, 7.3, 1.23)]
 
 
-@pytest.mark.parametrize("tab,proj,n,its_bound,work_bound", WORK)
-def test_newton_work_per_step_on_the_benchmark_protocol(tab, proj, n, its_bound, work_bound):
+@pytest.mark.parametrize("tab,proj,n,its_bound,work_bound,settled_its,settled_work", WORK)
+def test_newton_work_per_step_on_the_benchmark_protocol(tab, proj, n, its_bound, work_bound, settled_its,
+                                                        settled_work):
     """guiding_centre_symmetric, h = 10, points near the default loop, 50 steps from the start (the
     first steps' shorter history included).  Once the table is full the guess is the fitted
     recurrence's (a rotation it follows to round-off), too good to need a Jacobian: the carried
-    factors converge to the round-off floor.  The Newton work is 0.57-1.00 of the rule before
-    issue 55 (6.51, 8.50, 6.46, 5.58, 4.80, 6.83 iterations; one orbit 5.42, 4.80), which stops at
-    a fixed 4 ulps instead of the floor."""
+    factors converge to the round-off floor.  The predictor alone (``settle=False``) takes 0.57-1.00
+    of the Newton work of the rule before issue 55 (6.51, 8.50, 6.46, 5.58, 4.80, 6.83 iterations;
+    one orbit 5.42, 4.80), which stops at a fixed 4 ulps instead of the floor; the default, settled,
+    about one iteration more where it acts (at most 16 unknowns), 0.69-1.20 of that work."""
     q0 = protocol_points(n) if n > 1 else protocol_points(3)[:1]
-    its, jacs, work = newton_per_step(tab, proj, q0, lanes=1)
     old = newton_per_step(tab, proj, q0, OLD, lanes=1)
+    its, jacs, work = newton_per_step(tab, proj, q0, UNSETTLED, lanes=1)
     assert its <= its_bound and its < old[0]
     assert work <= work_bound * old[2]
+    its, jacs, work = newton_per_step(tab, proj, q0, lanes=1)
+    assert its <= settled_its
+    assert work <= settled_work * old[2]
 
 
 @pytest.mark.parametrize("tab,proj", [("GLRK2", "symmetric"), ("SRK3", "symmetric"), ("GLRK1", "none")])

@@ -213,3 +213,12 @@ def _scale(x):
     a = abs(x)
     sc = sel(a > 1.0, a, 1.0)
     return sel(np.isfinite(sc), sc, 1.0)
+
+
+@njit(inline='always', **_OPTS)
+def _own(x):
+    """|x|, or 1 where that is not finite: a coordinate's own size, below 1 too (the settled
+    approach's grid, :func:`integrators.kernel.newton._settle`: the floor's noise is in the ulps of
+    the coordinate, not of :func:`_scale`)."""
+    a = abs(x)
+    return sel(np.isfinite(a), a, 1.0)

@@ -90,25 +90,26 @@ def _update(z, r, done, scale, nz, f, F, dither):
 
 
 @njit(inline='always', **_OPTS)
-def _settle(z, done, scale, nz, f, F, grid):
-    """The settled approach (``grid`` > 0, double unknowns only): the first iterate of a solve reached
-    by an update of at most ``grid`` (relative, like the size: 2⁻⁴⁸, 16 ulps of scale) is rounded to
-    a grid of ulp(c), c = grid·2⁵¹·scale per unknown (8 ulps of scale; a move of at most 4), and
-    Newton goes on from there.  At the floor the computed residual is not smooth (a stage point's
-    rounding flips as an unknown moves by less than its ulp), so where Newton stops depends on the
-    side it comes from; a guess whose error is smooth in time came from the same side step after
-    step, and the round-off drifted (point vortices GLRK3-symmetric: the angular momentum over 64
-    starts and 2·10⁵ steps grew like n^0.98 with mean/RMS −0.47; docs/brouwer.md).  The rounded
-    iterate's offset from the solution is set by where the solution falls in the grid, not by the
-    guess: an iterate within 16 ulps of it rounds to the grid point next to the solution whatever
-    side it came from.  Once a solve; returns the lanes rounded now (their update is not the floor:
-    ``off``); ``F.rounds`` counts the updates since (:func:`_settling`, :func:`_settled`).  The
-    grid must be coarser than the floor's noise: 2 ulps (2⁻⁵⁰) left the point vortices'
-    SRK3-symmetric at 0.67 over 64 starts (0.53 with 8); finer in the increments' own ulps, their
-    GLRK3-symmetric momentum drifted again (docs/brouwer.md, "The settled approach,
-    ended at the floor")."""
+def _settle(z, done, own, nz, f, F, grid):
+    """The settled approach (``grid`` > 0, double unknowns only; the default): the first iterate of a
+    solve reached by an update of at most ``grid`` (relative, like the size: 2⁻⁴⁸, 16 ulps of scale)
+    is rounded to a grid of ulp(c), c = grid·2⁵¹·own per unknown, ``own`` its coordinate's own |value|
+    (8 ulps of the coordinate; a move of at most 4), and Newton goes on from there.  At the floor the
+    computed residual is not smooth (a stage point's rounding flips as an unknown moves by less than
+    its ulp), so where Newton stops depends on the side it comes from; a guess whose error is smooth
+    in time came from the same side step after step, and the round-off drifted (point vortices
+    GLRK3-symmetric: the angular momentum over 64 starts and 2·10⁵ steps grew like n^0.98 with
+    mean/RMS −0.47; docs/brouwer.md).  The rounded iterate's offset from the solution is set by
+    where the solution falls in the grid, not by the guess.  Once a solve; returns the lanes rounded
+    now (their update is not the floor: ``off``); ``F.rounds`` counts the updates since
+    (:func:`_settling`, :func:`_settled`).  The grid must be coarser than the floor's noise, which
+    is in the coordinate's own ulps: 2 ulps of max(|q|, 1) (2⁻⁵⁰) left the point vortices'
+    SRK3-symmetric at 0.67 over 64 starts, and finer, in the increments' own ulps, their
+    GLRK3-symmetric momentum drifted again; but 8 ulps of max(|q|, 1), hundreds of ulps of a
+    near-axis x, y ≈ 0.004, left P_ζ of near-axis Boozer orbits at 1.14e-13 (docs/brouwer.md, "The
+    settled approach, the default")."""
     first = mand(mand(mnot(done), ld(f, F.norm) <= grid), ld(f, F.rounds) == 0.0)
-    _to_grid(z, scale, nz, first, grid)
+    _to_grid(z, own, nz, first, grid)
     st(f, F.rounded, sel(first, 1.0, 0.0))
     st(f, F.rounds, sel(first, 1.0, ld(f, F.rounds)))
     return first
@@ -239,6 +240,7 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     st(f, F.stale, sel(mand(active, mnot(known)), 1.0, 0.0))
     st(f, F.exact, 0.0)
     scale = at(f, F.scale if mode == MODE_MAIN else F.pscale)
+    own = at(f, F.own if mode == MODE_MAIN else F.pown)
     Jt = at(w, S.Jt if mode == MODE_MAIN else S.pJ)
     pivt = at(ip, IP.pivt)
     st(f, F.rounded, 0.0)
@@ -275,7 +277,7 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
         _update(z, r, done, scale, nz, f, F, cfg.dither)
         ends = done
         if settles:
-            off = mor(off, _settle(z, done, scale, nz, f, F, cfg.settle))
+            off = mor(off, _settle(z, done, own, nz, f, F, cfg.settle))
             ends, after = _settling(done, f, F, cfg.settle_accept)
             off = mor(off, after)
         _judge(f, F, cfg, cfg.stall_complex if is_complex(z) else cfg.stall, off, dithers(z) and cfg.dither > 0.0)

@@ -113,6 +113,7 @@ Scratch.__doc__ = "Offsets (in logical elements; × W in memory) of the scratch 
 
 Flags = namedtuple("Flags", [
     "scale", "pscale",            # every unknown relative to its coordinate's size (nz, d)
+    "own", "pown",                # ... and that coordinate's own |value| (the settled approach's grid)
     "done", "ok", "stale", "prev", "its", "norm", "nan", "finite",   # Newton's per-lane bookkeeping
     "exact",                      # the last iteration's factors were taken at its own iterate (_judge)
     "rounded", "rounds",          # the dithered approach: the iterate was rounded; roundings this solve
@@ -158,7 +159,7 @@ def layout(s, d, nz):
         base=sd + 2 * d, D=DEPTH * (sd + 2 * d), dh=DEPTH * d, gram=RECURRENCE * (RECURRENCE + 1),
         ar=sd + 2 * d,
         q=d, p=d, lam=d, qc=d, pc=d, Y=sd, mu=d, lu=nz * nz, jz=nz, jq=d, jl=d))
-    F = _offsets(Flags, dict(dict.fromkeys(Flags._fields[:-1], 1), scale=nz, pscale=d))
+    F = _offsets(Flags, dict(dict.fromkeys(Flags._fields[:-1], 1), scale=nz, pscale=d, own=nz, pown=d))
     IP = _offsets(IntScratch, dict(piv=nz, pivt=nz, ipiv=d, pt=1))
     return S, F, IP
 

@@ -10,7 +10,7 @@ from numba import njit
 from ..projections import PRE_PREVIOUS, PRE_UNKNOWN
 from ..simd import anyl, at, ld, lget, lset, mand, mnot, mor, nlanes, re, sel, st
 from .records import DEPTH, MODE_MAIN, MODE_POST, _OPTS, RECURRENCE, _runtime, unknowns
-from .linalg import rounding, _scale
+from .linalg import rounding, _own, _scale
 from .equations import exact_points, _prepare
 from .newton import _newton
 from .predictor import _base, _first_guess, _guess, _recurrence, _remember
@@ -44,13 +44,16 @@ def _attempt(known, start, ev, inside, P, d, s, nz, g):
         st(z, i, ld(guess, i))
     for m in range(d):
         sc = _scale(ld(q, m))                   # every unknown relative to its coordinate's size
+        ow = _own(ld(q, m))
         for i in range(nz // d):
             st(f, F.scale + i * d + m, sc)
+            st(f, F.own + i * d + m, ow)
         if coupled:
             st(z, iL + m, ld(lam0, m))
         if plan.lobatto:
             st(z, iM + m, ld(mu0, m))
             st(f, F.scale + iM + m, _scale(ld(pbar, m)))
+            st(f, F.own + iM + m, _own(ld(pbar, m)))
     _newton(_runtime(MODE_MAIN, nz), (z, zev, r), nz, (at(w, S.lu), at(ip, IP.piv), known), ev, P, d, s, g)
     ok = ld(f, F.ok) != 0.0
     its = ld(f, F.its)
@@ -83,6 +86,7 @@ def _attempt(known, start, ev, inside, P, d, s, nz, g):
                 st(phe, m, (ld(pbe, m) + ld(w, S.sGe + m)) + rounding(ld(pbar, m), ld(sG, m), phm))
             st(pz, m, ld(lam0, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
+            st(f, F.pown + m, _own(ld(qh, m)))
         _newton(_runtime(MODE_POST, nz), (pz, pzev, pr), _runtime(d, nz), (at(w, S.PL), at(ip, IP.ipiv), _none(f, F)), ev,
                 P, d, s, g)
         ok = mand(ok, ld(f, F.ok) != 0.0)
