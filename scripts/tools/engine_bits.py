@@ -1,6 +1,6 @@
 """The compiled engine's results and speed, for comparing two versions of the kernel side by side.
 
-    python scripts/tools/engine_bits.py dump FILE.npz [PREDICTOR | undithered]   # every admissible pair on three systems, 15 steps
+    python scripts/tools/engine_bits.py dump FILE.npz [PREDICTOR | undithered | unsettled]   # every admissible pair on three systems, 15 steps
     python scripts/tools/engine_bits.py compare A.npz B.npz
     python scripts/tools/engine_bits.py speed [PAIR ...]   # point-steps/s, 10^4 points, 1 thread, best of 3
 
@@ -22,9 +22,12 @@ from integrators.projections import admission
 def dump(path, predictor=None):
     """``predictor``: Tolerances.predictor (None: the default); "extrapolate" gives the bits of the
     engine before issue 55, to compare with a dump made there; "undithered" the default rule without
-    the dithered approach (``Tolerances(dither=False)``), the engine's bits before it."""
-    tol = integrators.Tolerances() if predictor is None else integrators.Tolerances(dither=False) \
-        if predictor == "undithered" else integrators.Tolerances(predictor=predictor)
+    the dithered approach (``Tolerances(dither=False, settle=False)``), the engine's bits before it; "unsettled" the
+    default without the settled approach (``Tolerances(settle=False)``), the engine's bits before it
+    was the default."""
+    tol = integrators.Tolerances() if predictor is None else integrators.Tolerances(dither=False, settle=False) \
+        if predictor == "undithered" else integrators.Tolerances(settle=False) if predictor == "unsettled" \
+        else integrators.Tolerances(predictor=predictor)
     out = {}
     cases = (("guiding_centre_symmetric", 10.0, invariants.loop("guiding_centre", 64)),
              ("point_vortices", 0.1, np.array([[1, 0.1, 1, -0.1]])
@@ -50,7 +53,27 @@ def compare(a, b):
     A, B = np.load(a), np.load(b)
     differ = [k for k in A if k not in B or not np.array_equal(A[k], B[k], equal_nan=True)]
     print(f"{len(A)} arrays, {len(differ)} differ" + (f": {differ[:10]}" if differ else ""))
+    if differ:
+        _moved(A, B, differ)
     return 1 if differ or set(A) != set(B) else 0
+
+
+def _moved(A, B, differ):
+    """How far the arrays that differ moved: the largest difference of q, p and Λ relative to the
+    engine's scale, max(largest |value| of the array, 1) (Λ of round-off size reads as absolute),
+    where both are finite; the breakdown times that changed, and the
+    Newton iterations summed over every pair in each file."""
+    for f in ("q", "p", "Lam"):
+        keys = [k for k in differ if k.endswith("/" + f) and k in B]
+        rel = [(np.nanmax(np.abs(A[k] - B[k])) / max(np.nanmax(np.abs(A[k])), 1.0), k) for k in keys
+               if np.isfinite(A[k]).all() and np.isfinite(B[k]).all()]
+        if rel:
+            r, k = max(rel)
+            print(f"  {f}: {len(keys)} differ, at most {r:.2g} of scale ({k})")
+    moved = [k for k in differ if k.endswith("/breakdown_time")]
+    print(f"  breakdown times moved in {len(moved)} pairs" + (f": {moved[:10]}" if moved else ""))
+    its = [sum(float(np.sum(X[k])) for k in X if k.endswith("/iterations")) for X in (A, B)]
+    print(f"  Newton iterations: {its[0]:,.0f} -> {its[1]:,.0f} ({its[1] / its[0]:.3f})")
 
 
 def speed(pairs=("GLRK2-symmetric", "GLRK2-symplectic", "GLRK1-none")):
