@@ -12,10 +12,13 @@ double step is round-off alone and needs no reference run.  Two measurements:
   for 10⁶ points).  Systems: ``exact`` (ϑ = (−y, x)/2, H = r²/64: every evaluation exact, only the
   engine's own arithmetic rounds), ``linear`` (ϑ = 5/8·(−y, x), H = (1 + r²)/100) and ``gc``
   (the guiding centre's x-y part, ϑ = (2 + r²)/4·(−y, x), H = (1 + r²)/100).
-* ``long``: the built-in guiding_centre_symmetric, ``--starts`` starts spread over r in [0.3, 0.7],
-  phase, z and u, 5·10⁴ steps: the exponent of the RMS over the starts of r²(t)/r²(0) − 1 (fitted
-  from step 10³, ± the bootstrap spread over the starts) and its mean/RMS at the end (±1/√n for
-  independent walks).
+* ``long``: the built-in guiding_centre_symmetric (``--systems gc``, the default), ``--starts``
+  starts spread over r in [0.3, 0.7], phase, z and u, 5·10⁴ steps: the exponent of the RMS over the
+  starts of r²(t)/r²(0) − 1 (fitted from step 10³, ± the bootstrap spread over the starts) and its
+  mean/RMS at the end (±1/√n for independent walks).  ``exact`` and ``linear`` are its 4-D
+  counterparts whose ϑ is linear (ϑ = (−y/2, x/2, u, 0), H = r²/128 + u²/2: every evaluation exact;
+  ϑ = (−5y/8, 5x/8, u, 0), H = (1 + r²)/100 + u²/2): the same shear-free rotation of x, y and
+  drift of z, with a Jacobian that does not change, so Newton's factors are exact.
 
 The last column of both tables is the pair's double-double run's largest |r²/r²(0) − 1| (1,000 of
 the points one step, or 4 of the starts 2,000 steps), in exact rationals: about 1e-30 where the pair
@@ -23,10 +26,13 @@ keeps r² in exact arithmetic; a larger value means the row measures the method,
 
     python scripts/studies/brouwer_step_bias.py                        # about 1 minute (compiled)
     python scripts/studies/brouwer_step_bias.py --mode long --h 10,20  # about 10 minutes
+    python scripts/studies/brouwer_step_bias.py --mode long --systems gc,exact,linear \
+        --pairs GLRK6-standard,GLRK6-symmetric --h 10                  # about 4 minutes
 """
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 import time
@@ -99,9 +105,24 @@ def exactness(system, q0, tableau, projection, h, steps):
     return out
 
 
-def long_drift(pair, h, n, steps, tolerances=None):
-    """guiding_centre_symmetric from n spread starts: the r² drift's exponent and mean/RMS."""
-    system = integrators.system("guiding_centre_symmetric")
+def rotation4(kind):
+    """guiding_centre_symmetric (``gc``) or a 4-D counterpart with a linear ϑ (module docstring)."""
+    if kind == "gc":
+        return integrators.system("guiding_centre_symmetric")
+    x, y, z, u = sympy.symbols("x y z u", real=True)
+    if kind == "exact":
+        return System("rotation4_exact", [x, y, z, u], [-y / 2, x / 2, u, 0], (x**2 + y**2) / 128 + u**2 / 2)
+    if kind == "linear":
+        c = sympy.Rational(5, 8)
+        return System("rotation4_linear", [x, y, z, u], [-c * y, c * x, u, 0],
+                      (1 + x**2 + y**2) / 100 + u**2 / 2)
+    raise SystemExit(f"--systems: unknown {kind!r} in long mode (gc, exact, linear)")
+
+
+def long_drift(pair, h, n, steps, tolerances=None, kind="gc"):
+    """guiding_centre_symmetric (or a 4-D counterpart, :func:`rotation4`) from n spread starts: the
+    r² drift's exponent and mean/RMS."""
+    system = rotation4(kind)
     rng = np.random.default_rng(7)
     r, ph = rng.uniform(0.3, 0.7, n), rng.uniform(0, 2 * np.pi, n)
     q0 = np.stack([r * np.cos(ph), r * np.sin(ph), rng.uniform(-1, 1, n), rng.uniform(0.3, 0.7, n)], 1)
@@ -113,7 +134,7 @@ def long_drift(pair, h, n, steps, tolerances=None):
     d = relative_change_of_r2(sol.q[0], sol.q)[:, ok]
     exponent, spread = fit(np.arange(d.shape[0]) * every, d)
     rms = float(np.sqrt(np.mean(d[-1] ** 2)))
-    return dict(pair=pair, h=h, starts=int(ok.sum()), steps=steps, exponent=round(exponent, 3),
+    return dict(system=kind, pair=pair, h=h, starts=int(ok.sum()), steps=steps, exponent=round(exponent, 3),
                 exact=exactness(system, q0[:4], tableau, projection, h, DD_STEPS),
                 exponent_spread=round(spread, 3), mean_over_rms=float(d[-1].mean() / rms), rms_end=rms,
                 iterations=float(sol.newton_iterations[ok].sum() / (steps * ok.sum())))
@@ -122,7 +143,8 @@ def long_drift(pair, h, n, steps, tolerances=None):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mode", choices=("step", "long"), default="step")
-    ap.add_argument("--systems", default="exact,linear,gc", help="step mode: exact, linear, gc")
+    ap.add_argument("--systems", default=None,
+                    help="step mode: exact, linear, gc (default all three); long mode: gc (default), exact, linear")
     ap.add_argument("--pairs", default=None, help=f"default: {STEP_PAIRS} (step), {LONG_PAIRS} (long)")
     ap.add_argument("--h", default=None, help="comma-separated steps (default 10 (step), 10,20 (long))")
     ap.add_argument("--points", type=int, default=1_000_000, help="step mode")
@@ -141,7 +163,7 @@ def main(argv=None):
         hs = [float(v) for v in (args.h or "10").split(",")]
         print("| system | pair | h | it./step | mean of Δ(r²)/r² | its spread | mean/spread (±1/√n) | double-double |")
         print("|---|---|---:|---:|---:|---:|---:|---:|")
-        for kind in args.systems.split(","):
+        for kind in (args.systems or "exact,linear,gc").split(","):
             for h in hs:
                 for pair in (args.pairs or STEP_PAIRS).split(","):
                     row = step_bias(kind, pair, h, args.points, tolerances, args.after)
@@ -152,17 +174,17 @@ def main(argv=None):
                           flush=True)
     else:
         hs = [float(v) for v in (args.h or "10,20").split(",")]
-        print("| pair | h | it./step | exponent | mean/RMS at the end (±1/√n) | RMS at the end | double-double |")
-        print("|---|---:|---:|---|---:|---:|---:|")
-        for h in hs:
-            for pair in (args.pairs or LONG_PAIRS).split(","):
-                t = time.perf_counter()
-                row = long_drift(pair, h, args.starts, args.steps, tolerances)
-                row["seconds"] = round(time.perf_counter() - t, 1)
-                rows.append(row)
-                print(f"| {pair} | {h:g} | {row['iterations']:.2f} | {row['exponent']:.2f} ± {row['exponent_spread']:.2f} | "
-                      f"{row['mean_over_rms']:+.2f} (±{1 / np.sqrt(row['starts']):.2f}) | {row['rms_end']:.2e} | "
-                      f"{row['exact']:.0e} |", flush=True)
+        print("| system | pair | h | it./step | exponent | mean/RMS at the end (±1/√n) | RMS at the end | double-double |")
+        print("|---|---|---:|---:|---|---:|---:|---:|")
+        for kind, h, pair in itertools.product((args.systems or "gc").split(","), hs,
+                                               (args.pairs or LONG_PAIRS).split(",")):
+            t = time.perf_counter()
+            row = long_drift(pair, h, args.starts, args.steps, tolerances, kind)
+            row["seconds"] = round(time.perf_counter() - t, 1)
+            rows.append(row)
+            print(f"| {kind} | {pair} | {h:g} | {row['iterations']:.2f} | {row['exponent']:.2f} ± {row['exponent_spread']:.2f} | "
+                  f"{row['mean_over_rms']:+.2f} (±{1 / np.sqrt(row['starts']):.2f}) | {row['rms_end']:.2e} | "
+                  f"{row['exact']:.0e} |", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(dict(mode=args.mode, rule=json.loads(args.rule), rows=rows), indent=1))
 
