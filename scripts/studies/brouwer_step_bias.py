@@ -17,8 +17,9 @@ double step is round-off alone and needs no reference run.  Two measurements:
   starts of r²(t)/r²(0) − 1 (fitted from step 10³, ± the bootstrap spread over the starts) and its
   mean/RMS at the end (±1/√n for independent walks).  ``exact`` and ``linear`` are its 4-D
   counterparts whose ϑ is linear (ϑ = (−y/2, x/2, u, 0), H = r²/128 + u²/2: every evaluation exact;
-  ϑ = (−5y/8, 5x/8, u, 0), H = (1 + r²)/100 + u²/2): the same shear-free rotation of x, y and
-  drift of z, with a Jacobian that does not change, so Newton's factors are exact.
+  ϑ = (−5y/8, 5x/8, u, 0), H = (1 + r²)/100 + u²/2): a rotation of x, y (without the guiding
+  centre's shear) and the same drift of z, with a Jacobian that does not change, so Newton's
+  factors are exact.
 
 The last column of both tables is the pair's double-double run's largest |r²/r²(0) − 1| (1,000 of
 the points one step, or 4 of the starts 2,000 steps), in exact rationals: about 1e-30 where the pair
