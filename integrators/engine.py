@@ -544,15 +544,18 @@ class Engine:
     def state(self, q, p=None, lam=None, dtype=np.float64):
         """The state of points q (n, d) with p = ϑ(q) unless given and λ = 0 unless given; in the
         engine's precision (double-double: q, p, λ may be (n, d, 2) pairs or doubles, taken exactly,
-        and ϑ(q) is evaluated in double-double)."""
+        and ϑ(q) is evaluated in double-double).  A projected pair (a projection after Ψ_h) starts on
+        the constraint: p = ϑ(q) whatever is given, as the map (q, p, λ) ↦ (q₁, p₁, λ₁) of a
+        projected step reads no p (its later steps start from the p its solve left there)."""
+        fresh = p is None or self.record.post
         if self.precision == "double-double":
             q = np.asarray(q, dtype=np.float64)
             q2 = np.ascontiguousarray(np.stack([q, np.zeros_like(q)], axis=-1) if q.ndim == 2 else q)
-            p = theta_dd(self.system, q2) if p is None else p
+            p = theta_dd(self.system, q2) if fresh else p
             lam = np.zeros(q2.shape[:2]) if lam is None else lam
             return State.double_double(q2, p, lam, self.h, self.tableau.s)
         q = np.asarray(q)
-        p = self.system.theta(q) if p is None else p
+        p = self.system.theta(q) if fresh else p
         lam = np.zeros_like(q) if lam is None else lam
         return State(q, p, lam, self.h, self.tableau.s, dtype)
 

@@ -25,7 +25,8 @@ midpoint projection the paper's eq:symplectic_midpoint_projection_post prints no
 σ while its table has R(∞)λ_{n+1/2}; we follow the table (as GeometricIntegrators.jl
 does): with σ = +1 and R(∞) = −1 (GLRK1, SRK3) the constraint cannot be enforced
 at leading order.  Projected methods start every step on the constraint,
-p_n = ϑ(q_n) (eq:fibre_derivative); ``none`` carries its own p_n.
+p_n = ϑ(q_n) (eq:fibre_derivative): p_0 = ϑ(q_0), then the p_n the last step's
+projection left there (``kernel.equations._prepare``); ``none`` carries its own p_n.
 """
 from __future__ import annotations
 

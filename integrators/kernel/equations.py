@@ -97,12 +97,15 @@ def _plain_sum(wt, o, v, s, d, m):
 @njit(inline='always', **_OPTS)
 def _stages(z, jac, ev, P, c, q0, s, d, w, S):
     """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
-    eq:vprk_3); with ``jac`` also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i G_i (sY, sG), double +
-    correction weights.  In plain doubles every sum is formed to O(ε²) (:func:`_weighted_sum`):
-    ϑ_q(Q_i) e_i goes to tE, e_i what forming Q_i in doubles dropped (Σ_j a_ij Y_j's rounding,
-    q̃ + that sum's, q̃'s own ``S.eQ``: :func:`exact_points`), what forming G_i from the values
-    ϑ_q(Q_i), Y_i and ∇H(Q_i) dropped to ``S.Ge`` (:func:`_force`), and what rounding the two sums
-    to double dropped (with Σ b_i Ge_i) to ``S.sYe``, ``S.sGe``."""
+    eq:vprk_3); with ``jac`` (and in plain doubles) also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i
+    G_i (sY, sG), double + correction weights.  In plain doubles every sum is formed to O(ε²)
+    (:func:`_weighted_sum`): ϑ_q(Q_i) e_i goes to tE, e_i what forming Q_i in doubles dropped
+    (Σ_j a_ij Y_j's rounding, q̃ + that sum's, q̃'s own ``S.eQ``: :func:`exact_points`); to ``S.Ge``
+    what forming G_i from the values ϑ_q(Q_i), Y_i and ∇H(Q_i) dropped (:func:`_force`) and K_i e_i,
+    so that G_i too is taken at the stage point Q_i + e_i, as ϑ(Q_i) is (without it, one step of the
+    guiding centre's GLRK6-symmetric pair erred in r² by −0.0101 ± 0.0016 ulp on average over 4·10⁵
+    points with ϑ correctly rounded, −0.0012 with it: docs/brouwer.md); and what rounding the two
+    sums to double dropped (with Σ b_i Ge_i) to ``S.sYe``, ``S.sGe``."""
     k, h = P.k, P.h
     dd = d * d
     ddd = dd * d
@@ -127,22 +130,27 @@ def _stages(z, jac, ev, P, c, q0, s, d, w, S):
             x = acc + cor
             Qm = ld(q0, m) + x
             st(Q, i * d + m, Qm)
-        ev(raw(at(Q, i * d)), k, jac, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),
+        ev(raw(at(Q, i * d)), k, jac or exact, raw(at(th, i * d)), raw(at(T, i * dd)), raw(at(TT, i * ddd)),
            raw(at(dH, i * d)), raw(at(HH, i * dd)))
         if exact:
             apply(at(T, i * dd), e, at(tE, i * d), d)
-        Gi = at(G, i * d)
-        if exact:                               # G_i and what forming it dropped (Ge)
-            _force(at(T, i * dd), at(z, i * d), h, at(dH, i * d), Gi, at(w, S.Ge + i * d), d)
+        Gi, Ki = at(G, i * d), at(K, i * dd)
+        if jac or exact:
+            contract(at(TT, i * ddd), at(z, i * d), Ki, d)
+            for mn in range(dd):
+                st(Ki, mn, ld(Ki, mn) - h * ld(HH, i * dd + mn))
+        if exact:                               # G_i and what forming it dropped (Ge), at Q_i + e_i
+            Gei = at(w, S.Ge + i * d)
+            _force(at(T, i * dd), at(z, i * d), h, at(dH, i * d), Gi, Gei, d)
+            for m in range(d):                  # K_i e_i: G_i's first-order change from Q_i to Q_i + e_i
+                acc = ld(Ki, m * d) * ld(e, 0)
+                for n in range(1, d):
+                    acc = acc + ld(Ki, m * d + n) * ld(e, n)
+                st(Gei, m, ld(Gei, m) + acc)
         else:
             transpose_apply(at(T, i * dd), at(z, i * d), Gi, d)
             for m in range(d):
                 st(Gi, m, ld(Gi, m) - h * ld(dH, i * d + m))
-        if jac:
-            Ki = at(K, i * dd)
-            contract(at(TT, i * ddd), at(z, i * d), Ki, d)
-            for mn in range(dd):
-                st(Ki, mn, ld(Ki, mn) - h * ld(HH, i * dd + mn))
     for m in range(d):
         if exact:                               # the increments to O(ε²): what rounding them drops
             y, ye = _weighted_sum(c.b, c.b_lo, 0, z, s, d, m)       # goes to sYe, sGe
@@ -276,6 +284,7 @@ def _residual(z, jac, r, ev, P, c, d, s, w, S):
             if exact:
                 pe = ((ld(pwe, m) + ld(w, S.sGe + m)) + rounding(ld(pb, m), ld(sG, m), a)
                       + rounding(a, plan.sigma * ld(tl, m), p1m))
+                st(w, S.pcn + m, pe)           # p_{n+1}'s compensation term (:func:`_sum_increments`)
                 rl = (rl + pe) - ld(w, S.eQ + m)
             st(r, iL + m, rl)
     if plan.lobatto:
@@ -385,22 +394,25 @@ def _main(z, jac, r, J, ev, P, d, s, w, S):
 
 @njit(inline='always', **_OPTS)
 def _prepare(ev, k, plan, d, w, S):
-    """q̄, p̄ where Ψ_h starts: projected methods start on the constraint p_n = ϑ(q_n); the symplectic
-    projection first adds the last step's Λ_n (eq:symplectic_projection_pre); ϑ_q(q_n) stays in
-    the START slot for the symmetric projection's perturbation.  In plain doubles what rounding q̄ and
-    p̄ to double dropped goes to ``S.qbe`` and ``S.pbe`` (:func:`exact_points`), and so do the state's
-    compensation terms: q_c into ``S.qbe``, and p_c into ``S.pbe`` where p̄ = p_n (unprojected) or
-    ϑ_q(q_n) q_c where p̄ = ϑ(q_n), so that the step advances the state it was given, not its
-    doubles.  Seeing only the doubles, an unprojected step fed what q_c and p_c held back into the
-    method's parasitic mode every step: on the pendulum written with ϑ = (q₂, 0), GLRK1 keeps
+    """q̄, p̄ where Ψ_h starts: the state (q_n, p_n); the symplectic projection first adds the last
+    step's Λ_n (eq:symplectic_projection_pre); ϑ_q(q_n) goes to the START slot where a pre term takes
+    it there.  A projected step starts from the p_n its solve left on the constraint p = ϑ(q) (to
+    Newton's tolerance), not from ϑ(q_n) evaluated afresh: every fresh evaluation is a new rounding
+    of ϑ at q_n that the projection turns into a shift of q, and on the guiding centre's
+    GLRK6-standard pair those shifts added up with one sign (energy round-off exponent 0.58 ± 0.02
+    at 256 starts; docs/brouwer.md, "The projected steps' p_n").  In plain doubles what rounding q̄
+    and p̄ to double dropped goes to ``S.qbe`` and ``S.pbe`` (:func:`exact_points`), and so do the
+    state's compensation terms q_c and p_c, so that the step advances the state it was given, not
+    its doubles.  Seeing only the doubles, an unprojected step fed what q_c and p_c held back into
+    the method's parasitic mode every step: on the pendulum written with ϑ = (q₂, 0), GLRK1 keeps
     p₁ = q₂ in exact arithmetic (the error's sign flips a step); p₁ − q₂ broke from 0 after 10³-10⁴
     steps and walked by an ulp a step, and the energy's round-off with it (10⁶ steps: exponent 0.72,
     RMS 4.1·10⁻¹⁴; now 0.11, 7.8·10⁻¹⁷; docs/brouwer.md, "The state's compensation terms")."""
     q, p, lam, qc, pc = at(w, S.q), at(w, S.p), at(w, S.lam), at(w, S.qc), at(w, S.pc)
     qbar, pbar, tl, qbe = at(w, S.qbar), at(w, S.pbar), at(w, S.tl), at(w, S.qbe)
-    pth, pT = at(w, S.pth), at(w, S.pT)
+    pT = at(w, S.pT)
     exact = exact_points(ld(q, 0))
-    if plan.post:
+    if plan.pre == PRE_PREVIOUS or (plan.pre == PRE_UNKNOWN and plan.pre_at == START):
         evaluate(ev, k, q, False, w, S, START, d)
     for m in range(d):
         if plan.pre == PRE_PREVIOUS:
@@ -413,14 +425,11 @@ def _prepare(ev, k, plan, d, w, S):
             st(qbar, m, ld(q, m))
             if exact:
                 st(qbe, m, ld(qc, m))
-        st(pbar, m, ld(pth, m) if plan.post else ld(p, m))
+        st(pbar, m, ld(p, m))
     pbe = at(w, S.pbe)
     if exact:
-        if plan.post:                   # p̄ = ϑ(q_n): ϑ(q_n + q_c) to O(ε²)
-            apply(pT, qc, pbe, d)
-        else:
-            for m in range(d):
-                st(pbe, m, ld(pc, m))
+        for m in range(d):
+            st(pbe, m, ld(pc, m))
     if plan.pre == PRE_PREVIOUS:
         transpose_apply(pT, lam, tl, d)
         for m in range(d):

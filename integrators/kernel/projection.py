@@ -22,8 +22,10 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
     The contract of every post term (a projection's ``post_term``; :func:`_newton` calls it in
     MODE_POST, d unknowns): from the core's unprojected end point q̂, p̂ (``S.qh``, ``S.ph``, the
     step's q̄ + ΣbY, p̄ + ΣbG) and the iterate Λ = ``z``, write p_{n+1} into ``S.p1``, the d
-    residuals into ``r`` and, when ``jac``, their Jacobian ∂r/∂Λ row-major into ``J``.  The kernel
-    then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1}.  What a post term may use,
+    residuals into ``r`` and, when ``jac``, their Jacobian ∂r/∂Λ row-major into ``J``; in plain
+    doubles it may write what forming p_{n+1} dropped into ``S.pcn`` (the kernel sets it to 0
+    first).  The kernel then takes q_{n+1} = q̂ + σΛ (by compensated summation) and p_{n+1} (with
+    that term as its compensation term), and the next step starts from them.  What a post term may use,
     all public (integrators.kernel, integrators.simd): ``evaluate(ev, k, x, jac, w, S, slot, d)``, ϑ
     and its derivatives at x into a point slot (START, MIDPOINT, END; ``S.q1`` is scratch for such an
     x); ``transpose_apply`` (ϑ_qᵀv), ``apply`` (ϑ_q v), ``contract`` (∂(ϑ_qᵀv)/∂q), ``rounding``
@@ -31,7 +33,7 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
     ``S.qhe`` and ``S.phe`` hold what rounding q̂ and p̂ to double dropped: a post term resolves Λ
     below an ulp of q when its residual sees its sums exactly, as this one does (ϑ at q̂ + σΛ as
     ϑ + ϑ_q e, e that error plus its own sum's, :func:`rounding`; p̂ + σϑ_qᵀΛ with its errors
-    added); one that does not still converges, to an ulp of q."""
+    added, which are p_{n+1}'s compensation term); one that does not still converges, to an ulp of q."""
     dd = d * d
     qh, ph, q1, p1, tl = at(w, S.qh), at(w, S.ph), at(w, S.q1), at(w, S.p1), at(w, S.tl)
     th1, T1, TT1 = at(w, S.pth + END * d), at(w, S.pT + END * dd), at(w, S.pTT + END * dd * d)
@@ -51,7 +53,9 @@ def project(z, jac, r, J, ev, k, sig, d, w, S):
         st(p1, m, p1m)
         rm = p1m - ld(th1, m)
         if exact:
-            rm = (rm + (ld(w, S.phe + m) + rounding(ld(ph, m), sig * ld(tl, m), p1m))) - ld(te, m)
+            pe = ld(w, S.phe + m) + rounding(ld(ph, m), sig * ld(tl, m), p1m)
+            st(w, S.pcn + m, pe)
+            rm = (rm + pe) - ld(te, m)
         st(r, m, rm)
     if jac:
         S1 = at(w, S.S + dd)

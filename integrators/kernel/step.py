@@ -84,6 +84,7 @@ def _attempt(known, start, ev, inside, P, d, s, nz, g):
             if exact:
                 st(qhe, m, (ld(qbe, m) + ld(w, S.sYe + m)) + rounding(ld(qbar, m), ld(sY, m), qhm))
                 st(phe, m, (ld(pbe, m) + ld(w, S.sGe + m)) + rounding(ld(pbar, m), ld(sG, m), phm))
+                st(w, S.pcn + m, 0.0)           # p_{n+1}'s term: a post term of one's own may leave it
             st(pz, m, ld(lam0, m))
             st(f, F.pscale + m, _scale(ld(qh, m)))
             st(f, F.pown + m, _own(ld(qh, m)))
@@ -120,10 +121,11 @@ def _attempt(known, start, ev, inside, P, d, s, nz, g):
 @njit(inline='always', **_OPTS)
 def _sum_increments(plan, d, w, S):
     """q_{n+1} = q_n + inc (and, unprojected, p_{n+1} = p_n + Σ b_i G_i) by compensated summation into
-    qn, qcn (pn, pcn); a projected step's pn is already p_{n+1} and keeps its compensation term.  In
-    plain doubles what rounding the increment to double dropped (``S.ince``, ``S.sGe``) joins the
-    compensation term, so q_{n+1} is the step's own to O(ε²) of the increment (rounded, the
-    increment's errors of an ulp of itself added up with one sign on the guiding centre's GLRK4
+    qn, qcn (pn, pcn); a projected step's pn is already p_{n+1}, and in plain doubles its solve left
+    what forming it dropped in pcn: the two are renormalised (a double and a term below its half
+    ulp).  In plain doubles what rounding the increment to double dropped (``S.ince``, ``S.sGe``)
+    joins the compensation term, so q_{n+1} is the step's own to O(ε²) of the increment (rounded,
+    the increment's errors of an ulp of itself added up with one sign on the guiding centre's GLRK4
     pairs: docs/brouwer.md)."""
     q, p, qc, pc, sG = at(w, S.q), at(w, S.p), at(w, S.qc), at(w, S.pc), at(w, S.sG)
     inc, pn, qn, qcn, pcn = at(w, S.inc), at(w, S.pn), at(w, S.qn), at(w, S.qcn), at(w, S.pcn)
@@ -134,7 +136,13 @@ def _sum_increments(plan, d, w, S):
         st(qcn, m, y - (t - ld(q, m)))
         st(qn, m, t)
         if plan.post:
-            st(pcn, m, ld(pc, m))
+            if exact:
+                y = ld(pcn, m)
+                t = ld(pn, m) + y
+                st(pcn, m, y - (t - ld(pn, m)))
+                st(pn, m, t)
+            else:
+                st(pcn, m, ld(pc, m))
         else:
             y = ld(sG, m) + (ld(pc, m) + ld(w, S.sGe + m)) if exact else ld(sG, m) + ld(pc, m)
             t = ld(p, m) + y

@@ -63,12 +63,14 @@ SUMS = "2026-11-29: the increments summed exactly (kernel._weighted_sum)"
 RESIDUAL = "2026-11-30: the residual's sums and G_i to O(eps^2) (kernel.equations._force)"
 STATE = "2026-11-30: the step sees the state's compensation terms (kernel.equations._prepare)"
 SETTLED = "2026-11-30: the settled approach the default (Tolerances.settle, its grid in the coordinates' own ulps)"
-ENGINE = SETTLED          # the default since (before it STATE, Tolerances(settle=False); then RESIDUAL, then SUMS)
+PROJECTED_P = ("2026-12-01: projected steps start from the p_n their solve left, with its compensation term, "
+               "and G_i is taken at the exact stage point (kernel.equations._prepare, _stages)")
+ENGINE = PROJECTED_P      # the engine since (before it SETTLED; then STATE, Tolerances(settle=False); then RESIDUAL, then SUMS)
 DITHER_OPTION = "2026-11-30: the dithered approach (Tolerances.dither)"   # its first version, the default for a day:
                           # its floor test stopped early (docs/brouwer.md); the § rows of the table
 EXACT_POINTS = "2026-11-29: the equations see their points exactly (kernel.exact_points)"
 OLDER = "2026-11-28: before the exact points"
-MARKS = {ENGINE: "", STATE: " ¤", RESIDUAL: " ¶", SUMS: " ∥", DITHER_OPTION: " §", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
+MARKS = {ENGINE: "", SETTLED: " ♮", STATE: " ¤", RESIDUAL: " ¶", SUMS: " ∥", DITHER_OPTION: " §", EXACT_POINTS: " †", OLDER: " ‡"}    # the table's mark of a row of each engine
 NEGLIGIBLE = 1e-19        # a truncation part below this: the reference is H(q₀) (no double-double run)
 COUPLING_MAX = 0.01       # the round-off part δE moves the phase by ~δE·T (frequencies ~ 1 here), which
                           # moves a truncation error of size e by ~e·δE·T: e·T at most this, so that
@@ -305,8 +307,8 @@ def merged(docs):
 
 def markdown(rows):
     """The table of docs/brouwer.md: one line per pair, the three rules side by side; a pair measured
-    with another engine than ENGINE is marked (MARKS: ¤ the engine before the settled approach was
-    the default (STATE), ¶ the engine before the state's compensation
+    with another engine than ENGINE is marked (MARKS: ♮ the engine before projected steps kept their
+    p_n (SETTLED), ¤ the engine before the settled approach was the default (STATE), ¶ the engine before the state's compensation
     terms (RESIDUAL), ∥ the one before the residual's own sums (SUMS), § the first version of the
     dithered approach,
     whose floor test stopped early, † the exact points' engine, ‡ the engine before those),
