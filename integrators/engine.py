@@ -357,10 +357,6 @@ class Tolerances:
         orbits at 1.14e-13 (tests/test_boozer.py: 4.3e-14 in the coordinates' own ulps); ending the
         solve within 2 ulps instead of 2⁻⁶⁰ takes iterates a few ulps off (Kepler's round-off
         3-7.5×)
-    plain_first : the first Newton iteration of a solve evaluates the residual in plain arithmetic,
-        without the compensated terms (the points' rounding, the sums to O(ε²), ϑ_qq and ∇²H where no
-        Jacobian is taken); the iterations a solve can end at are compensated (default False; only
-        with the defects' guess, whose solves take at least two iterations)
     accept_unconverged : take a finite iterate that has not converged after ``maxiter`` iterations
         instead of failing the step (GeometricIntegrators.jl's rule: a point then stops only at a
         non-finite value or outside the domain; scripts/studies/stability_breakdown.py --stopping-rule)
@@ -389,7 +385,6 @@ class Tolerances:
     recurrence: int = 4
     dither: bool = False
     settle: bool = True
-    plain_first: bool = False
 
     def __post_init__(self):
         if self.predictor not in PREDICTORS:
@@ -453,8 +448,7 @@ class Tolerances:
                       dither=DITHER if self.dither and not double_double else 0.0,
                       settle=SETTLE if self.settle and fresh and not self.dither and self.tol == 0
                       and not double_double else 0.0,
-                      settle_accept=SETTLE_ACCEPT,
-                      plain=1.0 if self.plain_first else 0.0)
+                      settle_accept=SETTLE_ACCEPT)
         return np.array([values[name] for name in Newton._fields], dtype=np.float64)
 
 

@@ -95,7 +95,7 @@ def _plain_sum(wt, o, v, s, d, m):
 
 
 @njit(inline='always', **_OPTS)
-def _stages(z, jac, ev, P, c, q0, s, d, w, S, precise=True):
+def _stages(z, jac, ev, P, c, q0, s, d, w, S):
     """Q_i = q̃ + Σ_j a_ij Y_j, their ϑ, ϑ_q, ∇H, and G_i = ϑ_q(Q_i)ᵀY_i − h∇H(Q_i) (eq:vprk_1,
     eq:vprk_3); with ``jac`` (and in plain doubles) also K_i = ∂G_i/∂Q_i.  Then Σ b_i Y_i and Σ b_i
     G_i (sY, sG), double + correction weights.  In plain doubles every sum is formed to O(ε²)
@@ -111,7 +111,7 @@ def _stages(z, jac, ev, P, c, q0, s, d, w, S, precise=True):
     ddd = dd * d
     Q, th, T, TT, dH, HH = at(w, S.Q), at(w, S.th), at(w, S.T), at(w, S.TT), at(w, S.dH), at(w, S.HH)
     G, K, sY, sG = at(w, S.G), at(w, S.K), at(w, S.sY), at(w, S.sG)
-    exact = exact_points(ld(q0, 0)) and precise
+    exact = exact_points(ld(q0, 0))
     e0, e, tE = at(w, S.eQ), at(w, S.tl), at(w, S.tE)
     for i in range(s):
         for m in range(d):
@@ -175,11 +175,8 @@ def _stages(z, jac, ev, P, c, q0, s, d, w, S, precise=True):
 
 
 @njit(inline='always', **_OPTS)
-def _residual(z, jac, r, ev, P, c, d, s, w, S, precise=True):
-    """The residual of the step's equations; returns the slot of ϑ_q in the pre term.  ``precise``
-    False: in plain arithmetic whatever the number type (no point's rounding, no compensated sum,
-    no ϑ_qq without ``jac``), for an iterate far from the solution, whose update is many ulps
-    (:func:`integrators.kernel.newton._newton`, ``cfg.plain``).
+def _residual(z, jac, r, ev, P, c, d, s, w, S):
+    """The residual of the step's equations; returns the slot of ϑ_q in the pre term.
 
     R_i = ϑ(Q_i) − p̃ − Σ_j ā_ij G_j (+ μ d_i/b_i)  (eq:vprk_2, eq:vprk_lobatto).  With a coupled
     projection q̃ = q̄ + Λ, p̃ = p̄ + ϑ_q(x_pre)ᵀΛ (eq:symmetric_projection_pre,
@@ -208,7 +205,7 @@ def _residual(z, jac, r, ev, P, c, d, s, w, S, precise=True):
     sY, sG, q1, p1, mid, tl = at(w, S.sY), at(w, S.sG), at(w, S.q1), at(w, S.p1), at(w, S.mid), at(w, S.tl)
     th, G, pth, pT, tE, pwe = at(w, S.th), at(w, S.G), at(w, S.pth), at(w, S.pT), at(w, S.tE), at(w, S.pwe)
     Lz = at(z, iL)
-    exact = exact_points(ld(qbar, 0)) and precise
+    exact = exact_points(ld(qbar, 0))
     qbe, e0 = at(w, S.qbe), at(w, S.eQ)
     for m in range(d):
         if coupled:
@@ -221,7 +218,7 @@ def _residual(z, jac, r, ev, P, c, d, s, w, S, precise=True):
             st(q0, m, ld(qbar, m))
             if exact:
                 st(e0, m, ld(qbe, m))
-    _stages(z, jac, ev, P, c, q0, s, d, w, S, precise)
+    _stages(z, jac, ev, P, c, q0, s, d, w, S)
     px = START
     if coupled:
         if plan.pre_at == MIDPOINT:        # ϑ_q at the unprojected midpoint q̄_{n+1/2}
@@ -365,12 +362,12 @@ def _projection_jacobian(J, nz, px, c, plan, d, s, w, S):
 
 
 @njit(inline='always', **_OPTS)
-def _main(z, jac, r, J, ev, P, d, s, w, S, precise=True):
+def _main(z, jac, r, J, ev, P, d, s, w, S):
     """Residual of the step's equations (:func:`_residual`) and, when ``jac``, their exact Jacobian
     into J (:func:`_stage_jacobian`, :func:`_projection_jacobian`, the Lobatto rows)."""
     plan = P.plan
     c = _coefficients(P.tb, s)
-    px = _residual(z, jac, r, ev, P, c, d, s, w, S, precise)
+    px = _residual(z, jac, r, ev, P, c, d, s, w, S)
     if not jac:
         return
     dd = d * d

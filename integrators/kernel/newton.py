@@ -224,11 +224,6 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     with ``cfg.accept`` a finite iterate that has not converged after ``cfg.maxiter`` iterations is
     taken (GeometricIntegrators.jl's stopping rule).
 
-    With ``cfg.plain`` (and ``cfg.least`` ≥ 2, so that no lane ends at its first iteration) the
-    first iteration's residual is taken in plain arithmetic (:func:`_residual`, ``precise``): its
-    update is the guess's error, far above the ulp the compensated terms resolve, and every later
-    iteration, the ones a solve ends at, is compensated.
-
     ``iterate`` = (z, zev, r): the ``nz`` unknowns (the guess on entry), the solution, the residual;
     ``factors`` = (LU, piv, known): the kept factors and the lanes whose factors they are; ``P`` the
     :class:`Step`, ``g`` the :class:`Group`.
@@ -253,8 +248,7 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
     if dithers(z) and cfg.dither > 0.0:          # the guess too: with the defects' recurrence it is often
         _to_grid(z, scale, nz, active, cfg.dither)   # within the floor already, and its side is the history's
     settles = dithers(z) and cfg.settle > 0.0
-    plain = cfg.plain != 0.0 and cfg.least >= 2.0      # the first iteration's residual in plain arithmetic
-    for it in range(int(cfg.maxiter)):
+    for _ in range(int(cfg.maxiter)):
         done = ld(f, F.done) != 0.0
         if not anyl(mnot(done)):
             break
@@ -266,7 +260,7 @@ def _newton(mode, iterate, nz, factors, ev, P, d, s, g):
         jac = anyl(stale)
         Jx, pivx = (LU, piv) if W == 1 else (Jt, pivt)   # one lane: factorise in place
         if mode == MODE_MAIN:
-            _main(z, jac, r, Jx, ev, P, d, s, w, S, not (plain and it == 0))
+            _main(z, jac, r, Jx, ev, P, d, s, w, S)
         else:
             post_term(P, z, jac, r, Jx, ev, d, w, S)
         if jac:

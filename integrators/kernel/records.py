@@ -165,7 +165,7 @@ def layout(s, d, nz):
 
 
 Newton = namedtuple("Newton", "tol stall stall_complex maxiter refresh floor horizon accept velocity depth trust age every least rec "
-                               "carry fine dither settle settle_accept plain")
+                               "carry fine dither settle settle_accept")
 Newton.__doc__ = """Newton's stopping rule and the predictor as the kernel reads them (the float64 array of
 :meth:`integrators.engine.Tolerances.array`, by name): converged at max |δ|/scale ≤ ``tol``, or ≤
 ``stall`` (``stall_complex`` for complex-step values) once the update stops halving; at most
@@ -186,8 +186,7 @@ coefficients (0: none) of the defects' fitted linear recurrence (:func:`_recurre
 an iterate reached by an update larger than ``dither`` (> 0; double unknowns only) is rounded to a grid
 of about that size (:func:`_update`); the first iterate reached by an update of at most ``settle`` (> 0;
 double unknowns only) is rounded to a grid of about that size and the update after the one taken there
-ends the solve where it is at most ``settle_accept`` (:func:`_settle`); with ``plain`` (≠ 0) the
-first iteration's residual is taken in plain arithmetic (:func:`_newton`)."""
+ends the solve where it is at most ``settle_accept`` (:func:`_settle`)."""
 
 StateArrays = namedtuple("StateArrays", "q p Lam q_comp p_comp Y mu have_history live breakdown_time iterations steps "
                                         "lu piv have_lu jac_z jac_q jac_lam defects orders")

@@ -22,10 +22,10 @@ child measures, one thread, each tree's default lane width:
 Rules, each where the tree's ``Tolerances`` has the fields it names (a field the tree lacks is
 dropped, so ``fixed`` at 0985d75 is that tree's default): ``default`` (the tree's own),
 ``unsettled`` (settle=False: Newton to the floor without the settled approach), ``fixed``
-(tol = 4 eps, settle=False: the stopping rule of 0985d75), ``plain`` (the default with the first
-iteration's residual in plain arithmetic, plain_first=True) and ``unsettled_plain`` (settle=False
-with plain_first).  Only this tree runs them all; the others run
-``default`` and ``fixed``.
+(tol = 4 eps, settle=False: the stopping rule of 0985d75).  Only this tree runs them all; the
+others run ``default`` and ``fixed``.  The rows of docs/figures/speed_parts.json named ``plain``
+and ``unsettled_plain`` were run with a trial not kept (plain_first: the first Newton iteration's
+residual in plain arithmetic; docs/brouwer.md).
 """
 from __future__ import annotations
 
@@ -40,8 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from side_by_side import ROOT, alternate, clock_hz  # noqa: E402
 
 FIXED = 4 * np.finfo(np.float64).eps
-RULES = {"default": {}, "unsettled": {"settle": False}, "fixed": {"tol": FIXED, "settle": False},
-         "plain": {"plain_first": True}, "unsettled_plain": {"settle": False, "plain_first": True}}
+RULES = {"default": {}, "unsettled": {"settle": False}, "fixed": {"tol": FIXED, "settle": False}}
 CASES = (("loop", "GLRK2", "symmetric"), ("loop", "GLRK1", "none"), ("loop", "GLRK4", "symmetric"),
          ("loop", "GLRK2", "standard"), ("orbit", "GLRK4", "symmetric"), ("orbit", "GLRK6", "symmetric"),
          ("kepler", "GLRK2", "none"), ("kepler", "GLRK4", "none"),
