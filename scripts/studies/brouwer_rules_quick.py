@@ -1,7 +1,7 @@
 """Brouwer's law under another Newton rule, on the cases tests/test_brouwer.py holds the default to
 (issue 97): the same starts, steps and fits, each rule side by side, one process.
 
-    python scripts/studies/brouwer_rules_quick.py [--rules default,predicted_plain] [--cases all]
+    python scripts/studies/brouwer_rules_quick.py [--rules default,unsettled] [--cases all]
         [--json docs/figures/brouwer_rules_quick.json]
 
 The rows of docs/figures/brouwer_rules_quick.json named ``plain``, ``unsettled_plain`` and
@@ -10,7 +10,7 @@ residual in plain arithmetic, and the predicted floor: docs/figures/trials_predi
 remainder = 2⁻⁶⁰, settle=False, plain_first=True; docs/brouwer.md); today's engine runs
 ``default`` and ``unsettled``.
 
-Rules are scripts/tools/speed_parts.py's RULES by name.  Cases (the tests' own functions):
+Rules are scripts/tools/speed_parts.py's RULES by name.  Cases (the tests' measurements):
 ``kepler1``/``kepler2`` (GLRK1 h = 0.0005, GLRK2 h = 0.002, unprojected, 16 starts, 2·10⁴ steps),
 ``vortices`` (GLRK2-midpoint, h = 0.1, 16 starts, 2·10⁴ steps), ``gc4`` (GLRK4-symmetric on the
 symmetric guiding centre, h = 10, 16 starts, 5·10⁴ steps), ``gc6`` (GLRK6-standard, 64 starts,
